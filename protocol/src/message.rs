@@ -1,0 +1,435 @@
+//! The messages: [`HostMsg`] (PC -> MCU) and [`McuMsg`] (MCU -> PC).
+//!
+//! Every type here is fixed-size (no vectors, no strings), so each message
+//! has a compile-time maximum encoded size ([`postcard::experimental::max_size::MaxSize`]).
+//! Pressures travel as whole pascals in `i32` fields named `_pa`; times as
+//! milliseconds in fields named `_ms`.
+//!
+//! **The order of enum variants is the wire format.** Append new variants at
+//! the end and bump [`crate::PROTOCOL_VERSION`] when a layout changes; the
+//! wire snapshot tests (`protocol/tests/wire_snapshots.rs`) fail on any
+//! renumbering.
+
+use core::fmt;
+
+use postcard::experimental::max_size::MaxSize;
+use serde::{Deserialize, Serialize};
+
+use crate::limits::{CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
+
+/// What one chamber's valve pair does. A chamber has one inlet (from the
+/// positive tank) and one outlet (into the negative tank); this type has no
+/// value for "both open", so that state cannot be commanded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ValveState {
+    /// Inlet and outlet closed: the air in the chamber is held (sealed).
+    #[default]
+    Hold,
+    /// Inlet open, outlet closed: the chamber inflates from the positive tank.
+    Inflate,
+    /// Inlet closed, outlet open: the chamber deflates into the negative tank.
+    Deflate,
+}
+
+impl ValveState {
+    /// Whether the inlet valve is open.
+    pub const fn inlet_open(self) -> bool {
+        matches!(self, ValveState::Inflate)
+    }
+
+    /// Whether the outlet valve is open.
+    pub const fn outlet_open(self) -> bool {
+        matches!(self, ValveState::Deflate)
+    }
+
+    /// The state as -1 (deflate), 0 (hold) or 1 (inflate), as logged in
+    /// time-series files.
+    pub const fn as_sign(self) -> i8 {
+        match self {
+            ValveState::Hold => 0,
+            ValveState::Inflate => 1,
+            ValveState::Deflate => -1,
+        }
+    }
+}
+
+/// The state of all chambers, indexed by chamber number `0..CHAMBER_COUNT`.
+pub type Chambers = [ValveState; CHAMBER_COUNT];
+
+/// What a pump should do. The firmware still switches a pump off whenever
+/// its tank reaches the hard limit, whatever the mode.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum PumpMode {
+    /// Pump off.
+    #[default]
+    Off,
+    /// Run the pump with hysteresis to hold its tank at the target pressure.
+    Regulate,
+}
+
+/// Tank pressure targets, guaranteed inside the hard limits: the positive
+/// target in `0..=POSITIVE_TANK_MAX_PA`, the negative target in
+/// `NEGATIVE_TANK_MIN_PA..=0`. Decoding a frame whose targets lie outside
+/// fails (as [`crate::FrameError::Malformed`]), so no such value can reach
+/// the firmware's command handler.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[serde(try_from = "RawTankTargets")]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TankTargets {
+    positive_pa: i32,
+    negative_pa: i32,
+}
+
+/// The unchecked wire form of [`TankTargets`] (same layout).
+#[derive(Deserialize)]
+struct RawTankTargets {
+    positive_pa: i32,
+    negative_pa: i32,
+}
+
+/// A tank target outside the hard limits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LimitError {
+    /// The positive tank target is below 0 or above [`POSITIVE_TANK_MAX_PA`].
+    PositiveTarget {
+        /// The rejected value, in pascal.
+        requested_pa: i32,
+    },
+    /// The negative tank target is above 0 or below [`NEGATIVE_TANK_MIN_PA`].
+    NegativeTarget {
+        /// The rejected value, in pascal.
+        requested_pa: i32,
+    },
+}
+
+impl fmt::Display for LimitError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            LimitError::PositiveTarget { requested_pa } => write!(
+                f,
+                "positive tank target {requested_pa} Pa is outside 0..={POSITIVE_TANK_MAX_PA} Pa"
+            ),
+            LimitError::NegativeTarget { requested_pa } => write!(
+                f,
+                "negative tank target {requested_pa} Pa is outside {NEGATIVE_TANK_MIN_PA}..=0 Pa"
+            ),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for LimitError {}
+
+impl TankTargets {
+    /// Targets for both tanks, if both lie inside the hard limits.
+    pub const fn new(positive_pa: i32, negative_pa: i32) -> Result<Self, LimitError> {
+        if positive_pa < 0 || positive_pa > POSITIVE_TANK_MAX_PA {
+            return Err(LimitError::PositiveTarget {
+                requested_pa: positive_pa,
+            });
+        }
+        if negative_pa > 0 || negative_pa < NEGATIVE_TANK_MIN_PA {
+            return Err(LimitError::NegativeTarget {
+                requested_pa: negative_pa,
+            });
+        }
+        Ok(TankTargets {
+            positive_pa,
+            negative_pa,
+        })
+    }
+
+    /// The positive tank target, in pascal.
+    pub const fn positive_pa(self) -> i32 {
+        self.positive_pa
+    }
+
+    /// The negative tank target, in pascal.
+    pub const fn negative_pa(self) -> i32 {
+        self.negative_pa
+    }
+}
+
+impl TryFrom<RawTankTargets> for TankTargets {
+    type Error = LimitError;
+
+    fn try_from(raw: RawTankTargets) -> Result<Self, LimitError> {
+        TankTargets::new(raw.positive_pa, raw.negative_pa)
+    }
+}
+
+/// A command from the host (PC) to the MCU. Every command is answered with
+/// [`McuMsg::Ack`] or [`McuMsg::Nack`] carrying the command frame's sequence
+/// number, except [`HostMsg::Hello`], answered with [`McuMsg::HelloReply`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum HostMsg {
+    /// Ask for the protocol and firmware versions, limits and reset cause.
+    Hello,
+    /// Liveness check; acked. The nonce is opaque to the MCU.
+    Ping {
+        /// Any value chosen by the host.
+        nonce: u32,
+    },
+    /// Set every chamber's valves at once (needs the MCU armed).
+    SetChambers {
+        /// The new state per chamber.
+        chambers: Chambers,
+    },
+    /// Close every inlet and outlet: hold the air in all chambers.
+    SealAll,
+    /// Emergency: open every outlet (deflate all chambers) and stop the pumps.
+    /// Accepted in every state.
+    VentAll,
+    /// Pump control (needs the MCU armed).
+    SetPumps {
+        /// Mode of the positive (pressure) pump.
+        positive: PumpMode,
+        /// Mode of the negative (vacuum) pump.
+        negative: PumpMode,
+    },
+    /// Tank pressure targets for [`PumpMode::Regulate`].
+    SetTankTargets(TankTargets),
+    /// Arm the MCU: allow valve and pump commands. Refused while a tripped
+    /// state has not been cleared with [`HostMsg::Disarm`].
+    Arm,
+    /// Disarm: pumps off, all valves sealed; also clears a latched trip so
+    /// that the host may arm again.
+    Disarm,
+    /// Telemetry period; 0 stops telemetry.
+    SetTelemetryInterval {
+        /// Milliseconds between two [`McuMsg::Telemetry`] frames.
+        interval_ms: u16,
+    },
+    /// Keeps an armed MCU from tripping on host silence (any valid frame does).
+    Heartbeat,
+}
+
+/// Firmware version, semantic-versioning style.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FirmwareVersion {
+    /// Major version.
+    pub major: u8,
+    /// Minor version.
+    pub minor: u8,
+    /// Patch version.
+    pub patch: u8,
+}
+
+/// Why the MCU last reset (from the STM32 RCC_CSR flags).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetCause {
+    /// Power-on or brown-out reset.
+    PowerOn,
+    /// NRST pin.
+    Pin,
+    /// Software reset (SYSRESETREQ).
+    Software,
+    /// Independent watchdog: the control loop stalled.
+    IndependentWatchdog,
+    /// Window watchdog.
+    WindowWatchdog,
+    /// Low-power management reset.
+    LowPower,
+    /// No flag set, or not known on this target (e.g. under QEMU).
+    Unknown,
+}
+
+/// The MCU's answer to [`HostMsg::Hello`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HelloReply {
+    /// The MCU's [`crate::PROTOCOL_VERSION`].
+    pub protocol_version: u8,
+    /// The firmware's version.
+    pub firmware_version: FirmwareVersion,
+    /// The positive tank's hard limit compiled into the firmware, in pascal.
+    pub positive_tank_max_pa: i32,
+    /// The negative tank's hard limit compiled into the firmware, in pascal.
+    pub negative_tank_min_pa: i32,
+    /// Number of chambers the firmware drives.
+    pub chamber_count: u8,
+    /// Why the MCU last reset.
+    pub reset_cause: ResetCause,
+}
+
+/// Why a command was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum NackReason {
+    /// The frame passed its CRC but its message did not decode (including
+    /// tank targets outside the hard limits).
+    Malformed,
+    /// The frame passed its CRC but names a message this firmware does not know.
+    UnknownMessage,
+    /// The command needs the MCU armed.
+    NotArmed,
+    /// The MCU is tripped: disarm (clears the trip), then arm.
+    Tripped,
+    /// The command cannot run in the current state (e.g. arm while a fault
+    /// condition is still present).
+    Refused,
+}
+
+/// The MCU's safety state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ArmState {
+    /// Pumps off, valves sealed; only safe commands are accepted.
+    #[default]
+    Disarmed,
+    /// Valve and pump commands are accepted.
+    Armed,
+    /// A fault tripped the safety loop: pumps off, valves in the safe state,
+    /// latched until [`HostMsg::Disarm`].
+    Tripped,
+}
+
+/// A condition that trips the safety loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Fault {
+    /// The positive tank reached [`POSITIVE_TANK_MAX_PA`].
+    PositiveOverLimit,
+    /// The negative tank reached [`NEGATIVE_TANK_MIN_PA`].
+    NegativeOverLimit,
+    /// The positive tank's sensor reads out of range or is stuck while its pump runs.
+    PositiveSensor,
+    /// The negative tank's sensor reads out of range or is stuck while its pump runs.
+    NegativeSensor,
+    /// The positive pump ran longer than its run-time limit.
+    PositivePumpRunTime,
+    /// The negative pump ran longer than its run-time limit.
+    NegativePumpRunTime,
+    /// No valid frame from the host within the silence deadline while armed.
+    HostSilence,
+}
+
+impl Fault {
+    /// Every fault, in wire order.
+    pub const ALL: [Fault; 7] = [
+        Fault::PositiveOverLimit,
+        Fault::NegativeOverLimit,
+        Fault::PositiveSensor,
+        Fault::NegativeSensor,
+        Fault::PositivePumpRunTime,
+        Fault::NegativePumpRunTime,
+        Fault::HostSilence,
+    ];
+
+    /// This fault's bit in [`FaultFlags`].
+    pub const fn bit(self) -> u16 {
+        1 << (self as u16)
+    }
+}
+
+/// A set of [`Fault`]s, one bit each ([`Fault::bit`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FaultFlags(pub u16);
+
+impl FaultFlags {
+    /// No fault.
+    pub const NONE: FaultFlags = FaultFlags(0);
+
+    /// Whether `fault` is in the set.
+    pub const fn contains(self, fault: Fault) -> bool {
+        self.0 & fault.bit() != 0
+    }
+
+    /// The set with `fault` added.
+    pub const fn with(self, fault: Fault) -> FaultFlags {
+        FaultFlags(self.0 | fault.bit())
+    }
+
+    /// Whether the set is empty.
+    pub const fn is_empty(self) -> bool {
+        self.0 == 0
+    }
+
+    /// The faults in the set, in wire order.
+    pub fn iter(self) -> impl Iterator<Item = Fault> {
+        Fault::ALL.into_iter().filter(move |f| self.contains(*f))
+    }
+}
+
+/// Periodic state report from the MCU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Telemetry {
+    /// MCU time since reset, in milliseconds (wraps after ~49 days).
+    pub time_ms: u32,
+    /// Positive tank pressure, gauge, in pascal.
+    pub positive_tank_pa: i32,
+    /// Negative tank pressure, gauge, in pascal.
+    pub negative_tank_pa: i32,
+    /// The valve state of every chamber.
+    pub chambers: Chambers,
+    /// Whether the positive pump is running.
+    pub positive_pump_on: bool,
+    /// Whether the negative pump is running.
+    pub negative_pump_on: bool,
+    /// The safety state.
+    pub state: ArmState,
+    /// Faults seen since the last disarm.
+    pub faults: FaultFlags,
+    /// Control-loop ticks that overran their period since reset.
+    pub loop_overruns: u32,
+}
+
+/// Sent once when a fault trips the safety loop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FaultEvent {
+    /// MCU time of the trip, in milliseconds.
+    pub time_ms: u32,
+    /// What tripped.
+    pub fault: Fault,
+    /// Positive tank pressure at the trip, in pascal.
+    pub positive_tank_pa: i32,
+    /// Negative tank pressure at the trip, in pascal.
+    pub negative_tank_pa: i32,
+}
+
+/// A message from the MCU to the host.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum McuMsg {
+    /// Answer to [`HostMsg::Hello`].
+    HelloReply(HelloReply),
+    /// The command with this sequence number was accepted.
+    Ack {
+        /// Sequence number of the acknowledged host frame.
+        seq: u16,
+    },
+    /// The command with this sequence number was refused.
+    Nack {
+        /// Sequence number of the refused host frame.
+        seq: u16,
+        /// Why.
+        reason: NackReason,
+    },
+    /// Periodic state report.
+    Telemetry(Telemetry),
+    /// A fault tripped the safety loop.
+    Fault(FaultEvent),
+}
+
+/// A message type that travels in a frame.
+pub trait Message: Serialize + for<'de> Deserialize<'de> + MaxSize {
+    /// Number of enum variants: a decoded tag at or past this is an unknown message.
+    const VARIANT_COUNT: u8;
+}
+
+impl Message for HostMsg {
+    const VARIANT_COUNT: u8 = 11;
+}
+
+impl Message for McuMsg {
+    const VARIANT_COUNT: u8 = 5;
+}
