@@ -1,12 +1,16 @@
 //! One frame on the wire, and how it is encoded and checked.
 //!
 //! ```text
-//! raw   = version:u8 | seq:u16 LE | postcard(message) | crc32c(version..message):u32 LE
+//! raw   = version:u8 | seq:u16 LE | postcard(message) | crc:u32 LE
+//! crc   = CRC-32C(direction:u8 | version | seq | postcard(message))
 //! wire  = COBS(raw) | 0x00
 //! ```
 //!
 //! The CRC is CRC-32C (Castagnoli, `crc::CRC_32_ISCSI`): it catches every
 //! single-bit and every burst error up to 32 bits in a frame this short.
+//! The direction byte ([`Message::DIRECTION`]) is covered by the CRC but not
+//! sent: a frame travelling the other way (a looped-back or echoed line)
+//! fails its CRC instead of being read as the other side's message.
 //! COBS removes every 0x00 from the frame so that 0x00 can delimit frames;
 //! a receiver that joins mid-stream resynchronises at the next 0x00.
 //! [`MAX_FRAME_LEN`] bounds every frame on the wire, delimiter included.
@@ -94,10 +98,9 @@ impl fmt::Display for FrameError {
             FrameError::Cobs => f.write_str("invalid COBS encoding"),
             FrameError::TooShort => f.write_str("frame too short"),
             FrameError::Crc => f.write_str("CRC mismatch"),
-            FrameError::WrongVersion { version } => write!(
-                f,
-                "protocol version {version}, expected {PROTOCOL_VERSION}"
-            ),
+            FrameError::WrongVersion { version } => {
+                write!(f, "protocol version {version}, expected {PROTOCOL_VERSION}")
+            }
             FrameError::UnknownMessage { seq, tag } => {
                 write!(f, "unknown message tag {tag} (seq {seq})")
             }
@@ -144,7 +147,7 @@ pub fn encode_into<M: Message>(seq: u16, msg: &M, out: &mut [u8]) -> Result<usiz
         .map_err(|_| BufferTooSmall)?
         .len();
     let crc_at = HEADER_LEN + body_len;
-    let crc = CRC32C.checksum(raw.get(..crc_at).ok_or(BufferTooSmall)?);
+    let crc = checksum::<M>(raw.get(..crc_at).ok_or(BufferTooSmall)?);
     raw.get_mut(crc_at..crc_at + CRC_LEN)
         .ok_or(BufferTooSmall)?
         .copy_from_slice(&crc.to_le_bytes());
@@ -186,7 +189,9 @@ impl core::ops::Deref for EncodedFrame {
 
 impl fmt::Debug for EncodedFrame {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_tuple("EncodedFrame").field(&self.as_bytes()).finish()
+        f.debug_tuple("EncodedFrame")
+            .field(&self.as_bytes())
+            .finish()
     }
 }
 
@@ -201,6 +206,14 @@ pub fn decode_in_place<M: Message>(encoded: &mut [u8]) -> Result<Frame<M>, Frame
     check_raw(raw)
 }
 
+/// The CRC of a frame of `M`: CRC-32C over the direction byte and `checked`.
+fn checksum<M: Message>(checked: &[u8]) -> u32 {
+    let mut digest = CRC32C.digest();
+    digest.update(&[M::DIRECTION]);
+    digest.update(checked);
+    digest.finalize()
+}
+
 /// Checks and decodes a raw (un-COBSed) frame: CRC, version, then message.
 fn check_raw<M: Message>(raw: &[u8]) -> Result<Frame<M>, FrameError> {
     if raw.len() < HEADER_LEN + 1 + CRC_LEN {
@@ -208,7 +221,7 @@ fn check_raw<M: Message>(raw: &[u8]) -> Result<Frame<M>, FrameError> {
     }
     let (checked, crc) = raw.split_at(raw.len() - CRC_LEN);
     let crc_bytes: [u8; CRC_LEN] = crc.try_into().map_err(|_| FrameError::TooShort)?;
-    if CRC32C.checksum(checked) != u32::from_le_bytes(crc_bytes) {
+    if checksum::<M>(checked) != u32::from_le_bytes(crc_bytes) {
         return Err(FrameError::Crc);
     }
     let [version, seq_lo, seq_hi, body @ ..] = checked else {
@@ -227,5 +240,183 @@ fn check_raw<M: Message>(raw: &[u8]) -> Result<Frame<M>, FrameError> {
     match postcard::take_from_bytes::<M>(body) {
         Ok((msg, [])) => Ok(Frame { seq, msg }),
         Ok(_) | Err(_) => Err(FrameError::Malformed { seq }),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::vec::Vec;
+
+    use super::*;
+    use crate::{Decoder, TankTargets, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
+
+    /// A host-to-MCU wire frame around arbitrary raw bytes, with a correct CRC.
+    fn wire_with_valid_crc(header_and_body: &[u8]) -> Vec<u8> {
+        let mut raw = header_and_body.to_vec();
+        raw.extend_from_slice(&checksum::<HostMsg>(header_and_body).to_le_bytes());
+        let mut wire = std::vec![0u8; cobs::max_encoding_length(raw.len()) + 1];
+        let n = cobs::encode(&raw, &mut wire);
+        wire.truncate(n);
+        wire.push(0);
+        wire
+    }
+
+    fn decode_host(wire: &[u8]) -> Vec<Result<Frame<HostMsg>, FrameError>> {
+        Decoder::<HostMsg>::new().feed(wire).collect()
+    }
+
+    #[test]
+    fn valid_frame_decodes() {
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION, 5, 0, 10]);
+        let want = Frame {
+            seq: 5,
+            msg: HostMsg::Heartbeat,
+        };
+        assert_eq!(decode_host(&wire), [Ok(want)]);
+    }
+
+    #[test]
+    fn other_protocol_version_is_rejected() {
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION + 1, 5, 0, 10]);
+        let want = FrameError::WrongVersion {
+            version: PROTOCOL_VERSION + 1,
+        };
+        assert_eq!(decode_host(&wire), [Err(want)]);
+    }
+
+    #[test]
+    fn unknown_tag_is_an_unknown_message() {
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION, 9, 0, HostMsg::VARIANT_COUNT]);
+        let want = FrameError::UnknownMessage {
+            seq: 9,
+            tag: HostMsg::VARIANT_COUNT,
+        };
+        assert_eq!(decode_host(&wire), [Err(want)]);
+    }
+
+    #[test]
+    fn trailing_bytes_are_malformed() {
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION, 1, 0, 10, 0]);
+        assert_eq!(decode_host(&wire), [Err(FrameError::Malformed { seq: 1 })]);
+    }
+
+    #[test]
+    fn truncated_body_is_malformed() {
+        // SetChambers with 3 of its 8 valve states.
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION, 1, 0, 2, 0, 1, 2]);
+        assert_eq!(decode_host(&wire), [Err(FrameError::Malformed { seq: 1 })]);
+    }
+
+    #[test]
+    fn invalid_valve_state_is_malformed() {
+        let wire = wire_with_valid_crc(&[PROTOCOL_VERSION, 1, 0, 2, 0, 0, 0, 0, 0, 0, 0, 3]);
+        assert_eq!(decode_host(&wire), [Err(FrameError::Malformed { seq: 1 })]);
+    }
+
+    #[test]
+    fn tank_targets_outside_the_hard_limits_do_not_decode() {
+        for (positive_pa, negative_pa) in [
+            (POSITIVE_TANK_MAX_PA + 1, 0),
+            (-1, 0),
+            (0, NEGATIVE_TANK_MIN_PA - 1),
+            (0, 1),
+            (i32::MAX, i32::MIN),
+        ] {
+            assert!(TankTargets::new(positive_pa, negative_pa).is_err());
+            let mut raw = std::vec![PROTOCOL_VERSION, 4, 0];
+            // Same layout as TankTargets, but unchecked: two zigzag varints.
+            let body = postcard::to_allocvec(&(6u8, positive_pa, negative_pa)).expect("encodes");
+            raw.extend_from_slice(&body);
+            let got = decode_host(&wire_with_valid_crc(&raw));
+            assert_eq!(
+                got,
+                [Err(FrameError::Malformed { seq: 4 })],
+                "{positive_pa} {negative_pa}"
+            );
+        }
+    }
+
+    #[test]
+    fn tank_targets_at_the_hard_limits_decode() {
+        let targets = TankTargets::new(POSITIVE_TANK_MAX_PA, NEGATIVE_TANK_MIN_PA).expect("limits");
+        let msg = HostMsg::SetTankTargets(targets);
+        let wire = EncodedFrame::new(3, &msg).expect("fits");
+        assert_eq!(decode_host(&wire), [Ok(Frame { seq: 3, msg })]);
+    }
+
+    #[test]
+    fn frames_without_a_message_are_too_short() {
+        // Header and valid CRC, but no message byte.
+        let header_only = wire_with_valid_crc(&[PROTOCOL_VERSION, 0, 0]);
+        assert_eq!(decode_host(&header_only), [Err(FrameError::TooShort)]);
+        // COBS [1, 1] decodes to the single byte 0x00.
+        assert_eq!(decode_host(&[1, 1, 0]), [Err(FrameError::TooShort)]);
+    }
+
+    #[test]
+    fn bad_crc_is_rejected() {
+        let mut wire = EncodedFrame::new(1, &HostMsg::Arm).expect("fits").to_vec();
+        let crc_byte = wire.len() - 2;
+        wire[crc_byte] ^= 0x10;
+        assert_eq!(decode_host(&wire), [Err(FrameError::Crc)]);
+    }
+
+    #[test]
+    fn invalid_cobs_is_rejected() {
+        // The code byte 0x09 promises 8 more bytes before the delimiter.
+        assert_eq!(decode_host(&[0x09, 1, 2, 0]), [Err(FrameError::Cobs)]);
+    }
+
+    #[test]
+    fn overlong_input_is_reported_once_then_resynchronised() {
+        let mut stream = std::vec![0x55u8; 3 * MAX_ENCODED_LEN];
+        stream.push(0);
+        stream.extend_from_slice(&EncodedFrame::new(2, &HostMsg::Ping { nonce: 1 }).expect("fits"));
+        let want = Frame {
+            seq: 2,
+            msg: HostMsg::Ping { nonce: 1 },
+        };
+        assert_eq!(decode_host(&stream), [Err(FrameError::TooLong), Ok(want)]);
+    }
+
+    #[test]
+    fn empty_frames_are_skipped() {
+        let mut stream = std::vec![0u8, 0, 0];
+        stream.extend_from_slice(&EncodedFrame::new(0, &HostMsg::SealAll).expect("fits"));
+        stream.extend_from_slice(&[0, 0]);
+        let want = Frame {
+            seq: 0,
+            msg: HostMsg::SealAll,
+        };
+        assert_eq!(decode_host(&stream), [Ok(want)]);
+    }
+
+    #[test]
+    fn a_frame_is_only_read_in_its_own_direction() {
+        // `Ping { nonce: 5 }` and `Ack { seq: 5 }` have the same body bytes
+        // (tag 1, varint 5): only the direction byte in the CRC tells them apart.
+        let ping = EncodedFrame::new(0, &HostMsg::Ping { nonce: 5 }).expect("fits");
+        let ack = EncodedFrame::new(0, &McuMsg::Ack { seq: 5 }).expect("fits");
+        assert_eq!(ping[..4], ack[..4]);
+        let got: Vec<_> = Decoder::<McuMsg>::new().feed(&ping).collect();
+        assert_eq!(got, [Err(FrameError::Crc)]);
+        let got: Vec<_> = Decoder::<HostMsg>::new().feed(&ack).collect();
+        assert_eq!(got, [Err(FrameError::Crc)]);
+    }
+
+    #[test]
+    fn max_frame_len_bounds_every_message() {
+        assert_eq!(MAX_FRAME_LEN, MAX_ENCODED_LEN + 1);
+        assert!(MAX_FRAME_LEN < 64, "frames stay short: {MAX_FRAME_LEN}");
+    }
+
+    #[test]
+    fn small_output_buffer_is_an_error_not_a_panic() {
+        let mut out = [0u8; 8];
+        assert_eq!(
+            encode_into(0, &HostMsg::Ping { nonce: u32::MAX }, &mut out),
+            Err(BufferTooSmall)
+        );
     }
 }

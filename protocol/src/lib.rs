@@ -8,9 +8,13 @@
 //! # Frame format
 //!
 //! ```text
-//! raw   = version:u8 | seq:u16 LE | postcard(message) | crc32c(version..message):u32 LE
+//! raw   = version:u8 | seq:u16 LE | postcard(message) | crc:u32 LE
+//! crc   = CRC-32C(direction:u8 | version | seq | postcard(message))
 //! wire  = COBS(raw) | 0x00
 //! ```
+//!
+//! The direction byte (`b'H'` host to MCU, `b'M'` MCU to host) is not sent;
+//! it makes a frame read in the wrong direction (an echoing line) fail its CRC.
 //!
 //! A receiver checks, in order: length ([`FrameError::TooLong`]), COBS
 //! ([`FrameError::Cobs`]), CRC ([`FrameError::Crc`]), version

@@ -424,12 +424,17 @@ pub enum McuMsg {
 pub trait Message: Serialize + for<'de> Deserialize<'de> + MaxSize {
     /// Number of enum variants: a decoded tag at or past this is an unknown message.
     const VARIANT_COUNT: u8;
+    /// Direction byte, covered by the frame CRC but not sent, so that a frame
+    /// is only accepted by a receiver of its own direction.
+    const DIRECTION: u8;
 }
 
 impl Message for HostMsg {
     const VARIANT_COUNT: u8 = 11;
+    const DIRECTION: u8 = b'H';
 }
 
 impl Message for McuMsg {
     const VARIANT_COUNT: u8 = 5;
+    const DIRECTION: u8 = b'M';
 }
