@@ -3,8 +3,9 @@
 //! It keeps one fixed buffer of [`MAX_ENCODED_LEN`] bytes (no allocation),
 //! never panics, and after garbage, a corrupted frame or an overlong run of
 //! bytes it resynchronises at the next 0x00 delimiter. Empty frames (two
-//! delimiters in a row) are skipped silently, so a sender may send a lone
-//! 0x00 first to flush a receiver that joined mid-frame.
+//! delimiters in a row) are skipped silently, so a sender on a noisy line
+//! should start each frame with a 0x00 too: noise before the frame then ends
+//! as an error of its own instead of spoiling the frame.
 //!
 //! ```
 //! use dexitac_protocol::{Decoder, EncodedFrame, Frame, HostMsg};

@@ -9,8 +9,7 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use dexitac_protocol::{
-    Decoder, EncodedFrame, Frame, FrameError, HostMsg, McuMsg, PumpMode, ValveState,
-    CHAMBER_COUNT,
+    Decoder, EncodedFrame, Frame, FrameError, HostMsg, McuMsg, PumpMode, ValveState, CHAMBER_COUNT,
 };
 use serialport::{SerialPort, TTYPort};
 
@@ -36,8 +35,9 @@ fn read_frames<M: dexitac_protocol::Message>(
 }
 
 /// The device end: acks every valid host frame, counts rejected ones, and
-/// stops after `Disarm`. Returns every frame it accepted.
-fn run_device(mut port: TTYPort) -> (Vec<Frame<HostMsg>>, usize) {
+/// stops after `Disarm`. Returns every frame it accepted and the number of
+/// errors; the caller keeps the port open until it has read every ack.
+fn run_device(port: &mut TTYPort) -> (Vec<Frame<HostMsg>>, usize) {
     let mut decoder = Decoder::<HostMsg>::new();
     let mut accepted = Vec::new();
     let mut rejected = 0;
@@ -54,7 +54,8 @@ fn run_device(mut port: TTYPort) -> (Vec<Frame<HostMsg>>, usize) {
         for result in results {
             match result {
                 Ok(frame) => {
-                    let ack = EncodedFrame::new(out_seq, &McuMsg::Ack { seq: frame.seq }).expect("fits");
+                    let ack =
+                        EncodedFrame::new(out_seq, &McuMsg::Ack { seq: frame.seq }).expect("fits");
                     out_seq = out_seq.wrapping_add(1);
                     port.write_all(&ack).expect("device write");
                     accepted.push(frame);
@@ -76,7 +77,10 @@ fn commands() -> Vec<HostMsg> {
     vec![
         HostMsg::Hello,
         HostMsg::Arm,
-        HostMsg::SetPumps { positive: PumpMode::Regulate, negative: PumpMode::Regulate },
+        HostMsg::SetPumps {
+            positive: PumpMode::Regulate,
+            negative: PumpMode::Regulate,
+        },
         HostMsg::SetChambers { chambers },
         HostMsg::Ping { nonce: 77 },
         HostMsg::SealAll,
@@ -86,24 +90,32 @@ fn commands() -> Vec<HostMsg> {
 #[test]
 fn commands_are_acked_in_order_over_a_pty() {
     let (mut host, device) = TTYPort::pair().expect("pty pair");
-    host.set_timeout(Duration::from_millis(50)).expect("timeout");
-    let device = thread::spawn(move || run_device(device));
+    host.set_timeout(Duration::from_millis(50))
+        .expect("timeout");
+    let device = thread::spawn(move || {
+        let mut device = device;
+        (run_device(&mut device), device)
+    });
 
     let mut sent = Vec::new();
     for (seq, msg) in commands().into_iter().chain([HostMsg::Disarm]).enumerate() {
         let seq = seq as u16 + 100;
-        host.write_all(&EncodedFrame::new(seq, &msg).expect("fits")).expect("write");
+        host.write_all(&EncodedFrame::new(seq, &msg).expect("fits"))
+            .expect("write");
         sent.push(Frame { seq, msg });
     }
     let acks = read_frames(&mut host, &mut Decoder::<McuMsg>::new(), sent.len());
-    let (accepted, rejected) = device.join().expect("device thread");
+    let ((accepted, rejected), _device_port) = device.join().expect("device thread");
 
     assert_eq!(accepted, sent);
     assert_eq!(rejected, 0);
     let acked: Vec<u16> = acks
         .iter()
         .map(|a| match a {
-            Ok(Frame { msg: McuMsg::Ack { seq }, .. }) => *seq,
+            Ok(Frame {
+                msg: McuMsg::Ack { seq },
+                ..
+            }) => *seq,
             other => panic!("expected an ack, got {other:?}"),
         })
         .collect();
@@ -113,11 +125,17 @@ fn commands_are_acked_in_order_over_a_pty() {
 #[test]
 fn line_noise_costs_frames_but_never_forges_one() {
     let (mut host, device) = TTYPort::pair().expect("pty pair");
-    host.set_timeout(Duration::from_millis(50)).expect("timeout");
-    let device = thread::spawn(move || run_device(device));
+    host.set_timeout(Duration::from_millis(50))
+        .expect("timeout");
+    let device = thread::spawn(move || {
+        let mut device = device;
+        run_device(&mut device)
+    });
 
     // Every other command frame gets one byte overwritten; noise bursts in
-    // between. A deterministic xorshift keeps the test reproducible.
+    // between. Each frame starts with a 0x00, as the decoder docs advise on a
+    // noisy line, so noise costs at most the frame it touches. A
+    // deterministic xorshift keeps the test reproducible.
     let mut state = 0x2545_f491_u32;
     let mut next = move || {
         state ^= state << 13;
@@ -144,15 +162,20 @@ fn line_noise_costs_frames_but_never_forges_one() {
                 intact.push(Frame { seq, msg });
             }
             sent.push(Frame { seq, msg });
+            host.write_all(&[0]).expect("write");
             host.write_all(&wire).expect("write");
             let noise: Vec<u8> = (0..next() % 8).map(|_| next() as u8).collect();
             host.write_all(&noise).expect("write noise");
         }
     }
-    // Flush any half frame the noise left open, then stop the device.
+    // Stop the device.
     host.write_all(&[0]).expect("write");
-    let stop = Frame { seq: 9999, msg: HostMsg::Disarm };
-    host.write_all(&EncodedFrame::new(stop.seq, &stop.msg).expect("fits")).expect("write");
+    let stop = Frame {
+        seq: 9999,
+        msg: HostMsg::Disarm,
+    };
+    host.write_all(&EncodedFrame::new(stop.seq, &stop.msg).expect("fits"))
+        .expect("write");
     let (accepted, rejected) = device.join().expect("device thread");
 
     assert_eq!(accepted.last(), Some(&stop));
@@ -160,9 +183,12 @@ fn line_noise_costs_frames_but_never_forges_one() {
     for frame in accepted {
         assert!(sent.contains(frame), "forged frame {frame:?}");
     }
-    assert!(rejected >= 100, "the 120 corrupted frames were not detected: {rejected}");
-    // Noise between frames may swallow an intact frame's start only when it
-    // ends without a delimiter; most intact frames must survive.
-    let survived = intact.iter().filter(|f| accepted.contains(f)).count();
-    assert!(survived * 10 >= intact.len() * 7, "{survived} of {} intact frames", intact.len());
+    // Each corrupted frame is one error (or two, when the new byte is a 0x00
+    // that splits it); noise bursts add more.
+    assert!(
+        rejected >= 120,
+        "the 120 corrupted frames were not all detected: {rejected}"
+    );
+    let lost: Vec<_> = intact.iter().filter(|f| !accepted.contains(f)).collect();
+    assert!(lost.is_empty(), "intact frames lost to noise: {lost:?}");
 }
