@@ -29,7 +29,7 @@
 //! 4 CRC bytes, 1 COBS byte and the 0x00 delimiter, i.e. 9 bytes of overhead
 //! (the test `set_chambers_frame_is_18_bytes` pins these numbers). At
 //! 115 200 baud (10 bits a byte) that frame takes 1.56 ms on the line. No frame
-//! is longer than [`MAX_FRAME_LEN`] bytes.
+//! is longer than [`MAX_FRAME_LEN`] = 44 bytes (a full telemetry frame).
 //!
 //! # Example
 //!
