@@ -1,0 +1,105 @@
+//! Command dispatch: one decoded [`HostMsg`] -> a change of the desired
+//! state and the reply ([`McuMsg::Ack`], [`McuMsg::Nack`] or
+//! [`McuMsg::HelloReply`]).
+//!
+//! | command | disarmed | armed | tripped |
+//! |---|---|---|---|
+//! | `Hello`, `Ping`, `Heartbeat`, `SetTelemetryInterval`, `SetTankTargets` | ack | ack | ack |
+//! | `SealAll` (all valves closed) | ack | ack | ack |
+//! | `VentAll` (all outlets open, pump modes off) | ack | ack | ack |
+//! | `SetChambers`, `SetPumps` | nack `NotArmed` | ack | nack `Tripped` |
+//! | `Arm` | ack if no fault condition is present, else nack `Refused` | ack | nack `Tripped` |
+//! | `Disarm` (safe state, clears the latched trip and the fault flags) | ack | ack | ack |
+//!
+//! A refused command changes nothing.
+
+use dexitac_protocol::{
+    ArmState, FaultFlags, HelloReply, HostMsg, McuMsg, NackReason, PumpMode, CHAMBER_COUNT,
+    NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
+};
+
+use super::valves::{SAFE_CHAMBERS, VENT_CHAMBERS};
+use super::Controller;
+use crate::FIRMWARE_VERSION;
+
+/// Applies `msg` (frame sequence number `seq`) to `ctl`; returns the reply.
+pub fn dispatch(ctl: &mut Controller, seq: u16, msg: HostMsg, now_ms: u32) -> McuMsg {
+    match apply(ctl, msg, now_ms) {
+        Ok(Reply::Ack) => McuMsg::Ack { seq },
+        Ok(Reply::Hello) => McuMsg::HelloReply(hello_reply(ctl)),
+        Err(reason) => McuMsg::Nack { seq, reason },
+    }
+}
+
+/// A successful command's answer.
+enum Reply {
+    Ack,
+    Hello,
+}
+
+fn apply(ctl: &mut Controller, msg: HostMsg, now_ms: u32) -> Result<Reply, NackReason> {
+    match msg {
+        HostMsg::Hello => return Ok(Reply::Hello),
+        HostMsg::Ping { .. } | HostMsg::Heartbeat => {}
+        HostMsg::SetTelemetryInterval { interval_ms } => {
+            ctl.telemetry_interval_ms = interval_ms;
+            // The first report goes out at the next tick.
+            ctl.last_telemetry_ms = now_ms.wrapping_sub(u32::from(interval_ms));
+        }
+        HostMsg::SetTankTargets(targets) => ctl.targets = targets,
+        HostMsg::SealAll => ctl.chambers = SAFE_CHAMBERS,
+        HostMsg::VentAll => {
+            ctl.chambers = VENT_CHAMBERS;
+            ctl.positive_mode = PumpMode::Off;
+            ctl.negative_mode = PumpMode::Off;
+        }
+        HostMsg::SetChambers { chambers } => {
+            require_armed(ctl.state)?;
+            ctl.chambers = chambers;
+        }
+        HostMsg::SetPumps { positive, negative } => {
+            require_armed(ctl.state)?;
+            ctl.positive_mode = positive;
+            ctl.negative_mode = negative;
+        }
+        HostMsg::Arm => arm(ctl)?,
+        HostMsg::Disarm => {
+            ctl.state = ArmState::Disarmed;
+            ctl.enter_safe_state();
+            ctl.faults = FaultFlags::NONE;
+        }
+    }
+    Ok(Reply::Ack)
+}
+
+fn require_armed(state: ArmState) -> Result<(), NackReason> {
+    match state {
+        ArmState::Armed => Ok(()),
+        ArmState::Disarmed => Err(NackReason::NotArmed),
+        ArmState::Tripped => Err(NackReason::Tripped),
+    }
+}
+
+fn arm(ctl: &mut Controller) -> Result<(), NackReason> {
+    match ctl.state {
+        ArmState::Armed => Ok(()),
+        ArmState::Tripped => Err(NackReason::Tripped),
+        ArmState::Disarmed if !ctl.present.is_empty() => Err(NackReason::Refused),
+        ArmState::Disarmed => {
+            ctl.state = ArmState::Armed;
+            Ok(())
+        }
+    }
+}
+
+fn hello_reply(ctl: &Controller) -> HelloReply {
+    HelloReply {
+        protocol_version: PROTOCOL_VERSION,
+        firmware_version: FIRMWARE_VERSION,
+        positive_tank_max_pa: POSITIVE_TANK_MAX_PA,
+        negative_tank_min_pa: NEGATIVE_TANK_MIN_PA,
+        // CHAMBER_COUNT is 8 (protocol crate), which fits a u8.
+        chamber_count: CHAMBER_COUNT as u8,
+        reset_cause: ctl.reset_cause,
+    }
+}
