@@ -1,30 +1,22 @@
-//! The firmware binary for the STM32F103 (`cargo fw`). On the host this
-//! binary only explains how to build it.
+//! The firmware binary for the STM32F103 (`cargo fw`), or for QEMU's
+//! `stm32vldiscovery` machine with `--features qemu`. All the work is in
+//! [`board`] (hardware) and the `dexitac_firmware` library (control core).
+//! On the host this binary only explains how to build it.
 #![cfg_attr(target_os = "none", no_std, no_main)]
 
 #[cfg(target_os = "none")]
-mod target {
-    use defmt_rtt as _;
-    use panic_probe as _;
+mod board;
 
-    #[cortex_m_rt::entry]
-    fn main() -> ! {
-        let v = dexitac_firmware::FIRMWARE_VERSION;
-        defmt::info!(
-            "dexitac firmware {}.{}.{}, protocol {}",
-            v.major,
-            v.minor,
-            v.patch,
-            dexitac_protocol::PROTOCOL_VERSION
-        );
-        loop {
-            cortex_m::asm::wfi();
-        }
-    }
+#[cfg(target_os = "none")]
+#[cortex_m_rt::entry]
+fn main() -> ! {
+    board::run()
 }
 
 #[cfg(not(target_os = "none"))]
 fn main() {
-    eprintln!("dexitac-firmware runs on the STM32F103: build it with `cargo fw` (thumbv7m-none-eabi)");
+    eprintln!(
+        "dexitac-firmware runs on the STM32F103: build it with `cargo fw` (thumbv7m-none-eabi)"
+    );
     std::process::exit(2);
 }

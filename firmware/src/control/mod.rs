@@ -425,10 +425,17 @@ impl Controller {
 
     fn send_telemetry_if_due(&mut self, now_ms: u32, tx: &mut impl FrameSink) {
         let interval_ms = u32::from(self.telemetry_interval_ms);
-        if interval_ms == 0 || now_ms.wrapping_sub(self.last_telemetry_ms) < interval_ms {
+        let since_ms = now_ms.wrapping_sub(self.last_telemetry_ms);
+        if interval_ms == 0 || since_ms < interval_ms {
             return;
         }
-        self.last_telemetry_ms = now_ms;
+        // Keep the cadence after a late tick (the next report comes a little
+        // sooner), but restart it after a gap of more than one interval.
+        self.last_telemetry_ms = if since_ms < 2 * interval_ms {
+            self.last_telemetry_ms.wrapping_add(interval_ms)
+        } else {
+            now_ms
+        };
         let telemetry = self.telemetry(now_ms);
         self.send(&McuMsg::Telemetry(telemetry), tx);
     }
