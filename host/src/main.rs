@@ -1,18 +1,85 @@
 //! `dexitac`: the DexiTac command-line tool.
 
-use clap::Parser;
+mod analyze;
+mod bench_cmd;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
 
 /// DexiTac: soft dexterous tactile gripping — host tools for the pneumatic
 /// two-finger gripper with camera-based tactile fingertips.
 #[derive(Debug, Parser)]
 #[command(name = "dexitac", version, about, long_about = None)]
-struct Cli {}
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
 
-fn main() {
-    let _cli = Cli::parse();
-    println!(
-        "dexitac {}: wire protocol v{}. See `dexitac --help`.",
-        env!("CARGO_PKG_VERSION"),
-        dexitac::protocol::PROTOCOL_VERSION
-    );
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Tactile pipeline on image files: contact centre per frame to a CSV.
+    ///
+    /// Writes `frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms`
+    /// then `area_mm2,source,skipped`; cx, cy in input-image pixels (NaN when
+    /// no contact). Frames that cannot be read are reported on stderr and
+    /// left out; the exit status is then 1.
+    Analyze(AnalyzeArgs),
+    /// Accuracy against run time on synthetic scenes, per setting and scene
+    /// category (Markdown to stdout, plot and tables to --out-dir).
+    BenchPipeline(BenchArgs),
+}
+
+/// Arguments of `dexitac analyze`.
+#[derive(Debug, clap::Args)]
+pub struct AnalyzeArgs {
+    /// Rest (no-contact) frame; repeat for several.
+    #[arg(long, required = true, value_name = "REST.png")]
+    rest: Vec<PathBuf>,
+    /// Sensor config (TOML); defaults to the paper's parameters.
+    #[arg(long, value_name = "SENSOR.toml")]
+    config: Option<PathBuf>,
+    /// Output CSV, one row per frame.
+    #[arg(long, value_name = "PRED.csv")]
+    out: PathBuf,
+    /// Write the detected markers of each frame to DIR/<frame>.csv (x,y).
+    #[arg(long, value_name = "DIR")]
+    markers_out: Option<PathBuf>,
+    /// Frames (PNG or JPEG files, or directories of them).
+    #[arg(required = true, value_name = "FRAME")]
+    frames: Vec<PathBuf>,
+}
+
+/// Arguments of `dexitac bench-pipeline`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Frames per scene category for the fast settings.
+    #[arg(long, default_value_t = 40)]
+    frames: usize,
+    /// Frames per scene category for the exact (f64, every pixel) settings.
+    #[arg(long, default_value_t = 6)]
+    exact_frames: usize,
+    /// Seed of the synthetic scenes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Directory for results.md and pareto.png.
+    #[arg(long, default_value = "bench-out")]
+    out_dir: PathBuf,
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match cli.command {
+        Some(Command::Analyze(args)) => analyze::run(&args),
+        Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
+        None => {
+            println!(
+                "dexitac {}: wire protocol v{}. See `dexitac --help`.",
+                env!("CARGO_PKG_VERSION"),
+                dexitac::protocol::PROTOCOL_VERSION
+            );
+            ExitCode::SUCCESS
+        }
+    }
 }

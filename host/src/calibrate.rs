@@ -1,0 +1,159 @@
+//! Rest calibration from one or more no-contact working frames: the marker
+//! detector (scale found automatically, see [`crate::markers::auto_detector`]),
+//! the reference marker set (positions averaged over the frames where a
+//! marker was found in every frame), the marker pitch, the reference density
+//! on the density grid and the sensing-area mask.
+//!
+//! The mask keeps grid cells whose rest density is at least
+//! [`MASK_FRACTION`] of the typical interior rest density (90th percentile):
+//! that is the skin area up to about the outer marker row. Contact regions
+//! are only searched inside it.
+
+use crate::density::{self, DensityMap, DensitySetup};
+use crate::frame::GreyFrame;
+use crate::markers::{self, Detector, MarkerError};
+use crate::params::Params;
+use crate::tracking::PointIndex;
+use crate::PointPx;
+
+/// Mask cut-off, as a fraction of the interior rest density.
+pub const MASK_FRACTION: f32 = 0.5;
+/// Fewest rest markers a calibration accepts.
+pub const MIN_REST_MARKERS: usize = 7;
+
+/// Errors of rest calibration.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CalibrationError {
+    /// No rest frame given.
+    #[error("no rest frame")]
+    NoFrames,
+    /// Rest frames differ in size.
+    #[error("rest frames differ in size: {0}x{1} vs {2}x{3}")]
+    SizeMismatch(usize, usize, usize, usize),
+    /// Marker scale search failed.
+    #[error("marker detection on the rest frame failed: {0}")]
+    Markers(#[from] MarkerError),
+    /// Too few markers for a calibration.
+    #[error("rest frames give {found} stable markers; need at least {MIN_REST_MARKERS}")]
+    TooFewMarkers {
+        /// Markers found.
+        found: usize,
+    },
+}
+
+/// The rest (no-contact) reference of one sensor.
+#[derive(Debug, Clone)]
+pub struct Calibration {
+    /// Working frame width, px.
+    pub width: usize,
+    /// Working frame height, px.
+    pub height: usize,
+    /// The marker detector.
+    pub detector: Detector,
+    /// Reference marker positions, working px.
+    pub rest_markers: Vec<PointPx>,
+    /// Median nearest-neighbour distance of the rest markers, px.
+    pub pitch_px: f64,
+    /// The density setup used for the rest density and every frame.
+    pub density: DensitySetup,
+    /// Rest density on `density.grid()`.
+    pub rest_density: DensityMap,
+    /// Sensing-area mask on the same grid (row-major).
+    pub mask: Vec<bool>,
+}
+
+/// Calibrates from rest frames (all the same working size).
+pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, CalibrationError> {
+    let first = rest.first().ok_or(CalibrationError::NoFrames)?;
+    let (w, h) = (first.width(), first.height());
+    if let Some(f) = rest.iter().find(|f| (f.width(), f.height()) != (w, h)) {
+        return Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height()));
+    }
+    let detector = markers::auto_detector(first, &params.markers)?;
+    let mut sums: Vec<(PointPx, usize)> = markers::detect(first, &detector)
+        .positions()
+        .into_iter()
+        .map(|p| (p, 1))
+        .collect();
+    let anchor: Vec<PointPx> = sums.iter().map(|s| s.0).collect();
+    let match_px = (2.0 * detector.radius_px).max(2.0);
+    for frame in &rest[1..] {
+        let found = markers::detect(frame, &detector).positions();
+        let index = PointIndex::new(&found, w, h, match_px);
+        for (s, a) in sums.iter_mut().zip(&anchor) {
+            if let Some((k, _)) = index.nearest(&found, *a, match_px) {
+                s.0 = PointPx::new(s.0.x + found[k].x, s.0.y + found[k].y);
+                s.1 += 1;
+            }
+        }
+    }
+    let rest_markers: Vec<PointPx> = sums
+        .into_iter()
+        .filter(|s| s.1 == rest.len())
+        .map(|(p, n)| PointPx::new(p.x / n as f64, p.y / n as f64))
+        .collect();
+    if rest_markers.len() < MIN_REST_MARKERS {
+        return Err(CalibrationError::TooFewMarkers {
+            found: rest_markers.len(),
+        });
+    }
+    let pitch_px = median_spacing(&rest_markers);
+    let density = DensitySetup {
+        width: w,
+        height: h,
+        h_px: params.density.kernel_width_px,
+        mm_per_px: params.frame.mm_per_px,
+        mode: params.density.mode,
+        step_px: params.density.grid_step_px as usize,
+        truncate_sigmas: params.density.truncate_sigmas,
+    };
+    let rest_density = density::estimate(&rest_markers, &density, None);
+    let mask = sensing_mask(&rest_density);
+    Ok(Calibration {
+        width: w,
+        height: h,
+        detector,
+        rest_markers,
+        pitch_px,
+        density,
+        rest_density,
+        mask,
+    })
+}
+
+/// Median distance from each marker to its nearest neighbour, px
+/// (O(n^2): calibration runs once).
+fn median_spacing(points: &[PointPx]) -> f64 {
+    let mut d: Vec<f64> = points
+        .iter()
+        .enumerate()
+        .map(|(n, p)| {
+            points
+                .iter()
+                .enumerate()
+                .filter(|&(m, _)| m != n)
+                .map(|(_, q)| (q.x - p.x).hypot(q.y - p.y))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let k = d.len() / 2;
+    *d.select_nth_unstable_by(k, f64::total_cmp).1
+}
+
+fn sensing_mask(rest: &DensityMap) -> Vec<bool> {
+    let mut inside: Vec<f32> = rest
+        .values_per_mm2
+        .iter()
+        .cloned()
+        .filter(|v| *v > 0.0)
+        .collect();
+    if inside.is_empty() {
+        return vec![false; rest.values_per_mm2.len()];
+    }
+    let k = (inside.len() - 1) * 9 / 10;
+    let typical = *inside.select_nth_unstable_by(k, f32::total_cmp).1;
+    rest.values_per_mm2
+        .iter()
+        .map(|&v| v >= MASK_FRACTION * typical)
+        .collect()
+}

@@ -1,0 +1,365 @@
+//! Stage 3, kernel density of the markers (Sec. III-B, Eq. 1), in markers
+//! per mm^2:
+//!
+//! `d(x, y) = sum_m 1/(2 pi h^2) exp(-((x - x_m)^2 + (y - y_m)^2) / 2h^2) / s^2`
+//!
+//! with `s` mm per px. This is the normalised 2-D Gaussian (SPEC section 3);
+//! the paper's `1/(M sqrt(2 pi) h^2)` prefactor is not used.
+//!
+//! Two implementations behind one entry point, [`estimate`]:
+//! - **exact** (reference): f64, every pixel, every marker, no truncation.
+//!   The Gaussian factorises, `exp(-(dx^2+dy^2)/2h^2) = gx(x) gy(y)`, so each
+//!   pixel costs one multiply-add per marker instead of one `exp` (the same
+//!   value up to rounding; checked against the direct formula in the tests).
+//! - **fast**: f32 on a grid of `step` px (samples at block centres), kernel
+//!   truncated at `truncate_sigmas * h`, and only inside a region of interest
+//!   (the cells around moved markers; see [`crate::pipeline`]). Its
+//!   difference from the exact reference is measured in the tests and in
+//!   BENCHMARKS.md.
+
+use crate::params::DensityMode;
+use crate::PointPx;
+
+/// A regular sampling grid over the working frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Grid {
+    /// Spacing of the samples, px.
+    pub step_px: usize,
+    /// Samples across.
+    pub nx: usize,
+    /// Samples down.
+    pub ny: usize,
+}
+
+impl Grid {
+    /// The grid of `step_px` covering a `width x height` frame.
+    pub fn new(width: usize, height: usize, step_px: usize) -> Self {
+        let step_px = step_px.max(1);
+        Self {
+            step_px,
+            nx: width.div_ceil(step_px),
+            ny: height.div_ceil(step_px),
+        }
+    }
+
+    /// Working-frame coordinate of sample index `i` (block centre).
+    pub fn coord(&self, i: f64) -> f64 {
+        i * self.step_px as f64 + (self.step_px as f64 - 1.0) / 2.0
+    }
+
+    /// Working-frame point of cell `(i, j)` plus a fractional offset.
+    pub fn point(&self, i: f64, j: f64) -> PointPx {
+        PointPx::new(self.coord(i), self.coord(j))
+    }
+
+    /// All cells.
+    pub fn full(&self) -> CellRect {
+        CellRect {
+            i0: 0,
+            j0: 0,
+            i1: self.nx,
+            j1: self.ny,
+        }
+    }
+
+    /// Cells whose sample lies within the working-px box `[x0, x1] x [y0, y1]`.
+    pub fn cells_within(&self, x0: f64, y0: f64, x1: f64, y1: f64) -> CellRect {
+        let off = (self.step_px as f64 - 1.0) / 2.0;
+        let s = self.step_px as f64;
+        let lo = |v: f64, n: usize| (((v - off) / s).ceil().max(0.0) as usize).min(n);
+        let hi = |v: f64, n: usize| ((((v - off) / s).floor() + 1.0).max(0.0) as usize).min(n);
+        CellRect {
+            i0: lo(x0, self.nx),
+            j0: lo(y0, self.ny),
+            i1: hi(x1, self.nx),
+            j1: hi(y1, self.ny),
+        }
+    }
+}
+
+/// A rectangle of grid cells `[i0, i1) x [j0, j1)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CellRect {
+    /// First column.
+    pub i0: usize,
+    /// First row.
+    pub j0: usize,
+    /// One past the last column.
+    pub i1: usize,
+    /// One past the last row.
+    pub j1: usize,
+}
+
+impl CellRect {
+    /// Number of cells (0 when empty).
+    pub fn area(&self) -> usize {
+        self.i1.saturating_sub(self.i0) * self.j1.saturating_sub(self.j0)
+    }
+
+    /// True when `(i, j)` is inside.
+    pub fn contains(&self, i: usize, j: usize) -> bool {
+        i >= self.i0 && i < self.i1 && j >= self.j0 && j < self.j1
+    }
+}
+
+/// Density samples on a grid, markers per mm^2. Only cells inside `roi` were
+/// computed; the others are 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DensityMap {
+    /// The grid.
+    pub grid: Grid,
+    /// The computed cells.
+    pub roi: CellRect,
+    /// Row-major `grid.nx * grid.ny` values, markers per mm^2.
+    pub values_per_mm2: Vec<f32>,
+}
+
+impl DensityMap {
+    /// Value at cell `(i, j)`.
+    pub fn at(&self, i: usize, j: usize) -> f32 {
+        self.values_per_mm2[j * self.grid.nx + i]
+    }
+}
+
+/// Everything the density stage needs besides the markers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DensitySetup {
+    /// Working frame width, px.
+    pub width: usize,
+    /// Working frame height, px.
+    pub height: usize,
+    /// Kernel width h, px.
+    pub h_px: f64,
+    /// mm per working px.
+    pub mm_per_px: f64,
+    /// Implementation.
+    pub mode: DensityMode,
+    /// Fast path grid step, px (the exact path always uses 1).
+    pub step_px: usize,
+    /// Fast path truncation radius, units of h.
+    pub truncate_sigmas: f64,
+}
+
+impl DensitySetup {
+    /// The grid this setup samples on.
+    pub fn grid(&self) -> Grid {
+        match self.mode {
+            DensityMode::Exact => Grid::new(self.width, self.height, 1),
+            DensityMode::Fast => Grid::new(self.width, self.height, self.step_px),
+        }
+    }
+}
+
+/// Stage 3 entry: the density of `markers` on `setup.grid()`, computed inside
+/// `roi` (all cells for `None`). Non-finite marker positions are ignored.
+pub fn estimate(markers: &[PointPx], setup: &DensitySetup, roi: Option<CellRect>) -> DensityMap {
+    let grid = setup.grid();
+    let roi = roi.unwrap_or(grid.full());
+    match setup.mode {
+        DensityMode::Exact => {
+            let exact = exact(
+                markers,
+                setup.width,
+                setup.height,
+                setup.h_px,
+                setup.mm_per_px,
+            );
+            DensityMap {
+                grid,
+                roi: grid.full(),
+                values_per_mm2: exact.into_iter().map(|v| v as f32).collect(),
+            }
+        }
+        DensityMode::Fast => fast(markers, grid, roi, setup),
+    }
+}
+
+/// The reference density at every pixel of a `width x height` frame, f64,
+/// row-major, markers per mm^2 (no truncation).
+pub fn exact(
+    markers: &[PointPx],
+    width: usize,
+    height: usize,
+    h_px: f64,
+    mm_per_px: f64,
+) -> Vec<f64> {
+    let norm = 1.0 / (std::f64::consts::TAU * h_px * h_px * mm_per_px * mm_per_px);
+    let inv = 1.0 / (2.0 * h_px * h_px);
+    let mut out = vec![0f64; width * height];
+    let mut gx = vec![0f64; width];
+    let mut gy = vec![0f64; height];
+    for m in markers.iter().filter(|m| m.is_finite()) {
+        for (x, g) in gx.iter_mut().enumerate() {
+            let d = x as f64 - m.x;
+            *g = (-d * d * inv).exp();
+        }
+        for (y, g) in gy.iter_mut().enumerate() {
+            let d = y as f64 - m.y;
+            *g = norm * (-d * d * inv).exp();
+        }
+        for (row, &fy) in out.chunks_exact_mut(width).zip(&gy) {
+            if fy == 0.0 {
+                continue;
+            }
+            for (v, &fx) in row.iter_mut().zip(&gx) {
+                *v += fy * fx;
+            }
+        }
+    }
+    out
+}
+
+/// The fast path: f32, grid, truncated kernel, ROI only.
+fn fast(markers: &[PointPx], grid: Grid, roi: CellRect, setup: &DensitySetup) -> DensityMap {
+    let mut values = vec![0f32; grid.nx * grid.ny];
+    let h = setup.h_px;
+    let norm = (1.0 / (std::f64::consts::TAU * h * h * setup.mm_per_px * setup.mm_per_px)) as f32;
+    let inv = (1.0 / (2.0 * h * h)) as f32;
+    let reach = setup.truncate_sigmas * h;
+    let mut gx = Vec::new();
+    let mut gy = Vec::new();
+    for m in markers.iter().filter(|m| m.is_finite()) {
+        let win = grid.cells_within(m.x - reach, m.y - reach, m.x + reach, m.y + reach);
+        let win = CellRect {
+            i0: win.i0.max(roi.i0),
+            j0: win.j0.max(roi.j0),
+            i1: win.i1.min(roi.i1),
+            j1: win.j1.min(roi.j1),
+        };
+        if win.area() == 0 {
+            continue;
+        }
+        gx.clear();
+        gx.extend((win.i0..win.i1).map(|i| {
+            let d = (grid.coord(i as f64) - m.x) as f32;
+            (-d * d * inv).exp()
+        }));
+        gy.clear();
+        gy.extend((win.j0..win.j1).map(|j| {
+            let d = (grid.coord(j as f64) - m.y) as f32;
+            norm * (-d * d * inv).exp()
+        }));
+        for (j, &fy) in (win.j0..win.j1).zip(&gy) {
+            let row = &mut values[j * grid.nx + win.i0..j * grid.nx + win.i1];
+            for (v, &fx) in row.iter_mut().zip(&gx) {
+                *v += fy * fx;
+            }
+        }
+    }
+    DensityMap {
+        grid,
+        roi,
+        values_per_mm2: values,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::test_fixtures;
+
+    /// Eq. 1 with the normalised Gaussian, written out literally.
+    fn direct(markers: &[PointPx], x: f64, y: f64, h: f64, s: f64) -> f64 {
+        markers
+            .iter()
+            .map(|m| {
+                let r2 = (x - m.x).powi(2) + (y - m.y).powi(2);
+                (-r2 / (2.0 * h * h)).exp() / (std::f64::consts::TAU * h * h)
+            })
+            .sum::<f64>()
+            / (s * s)
+    }
+
+    fn setup(w: usize, h: usize, mode: DensityMode, step: usize) -> DensitySetup {
+        DensitySetup {
+            width: w,
+            height: h,
+            h_px: 15.0,
+            mm_per_px: 0.1,
+            mode,
+            step_px: step,
+            truncate_sigmas: 3.0,
+        }
+    }
+
+    #[test]
+    fn separable_exact_equals_the_direct_formula() {
+        let markers = test_fixtures::hex_points(80, 60, 15.0);
+        let d = exact(&markers, 80, 60, 15.0, 0.1);
+        for &(x, y) in &[(0usize, 0usize), (40, 30), (79, 59), (13, 47)] {
+            let want = direct(&markers, x as f64, y as f64, 15.0, 0.1);
+            let got = d[y * 80 + x];
+            assert!(
+                (got - want).abs() <= 1e-12 * want.max(1e-300),
+                "{got} vs {want}"
+            );
+        }
+    }
+
+    #[test]
+    fn one_marker_integrates_to_one_marker() {
+        let m = [PointPx::new(50.0, 50.0)];
+        let d = exact(&m, 101, 101, 6.0, 0.1);
+        let total: f64 = d.iter().sum::<f64>() * 0.1 * 0.1;
+        assert!((total - 1.0).abs() < 1e-6, "{total}");
+    }
+
+    #[test]
+    fn hex_grid_interior_density_is_one_per_cell_area() {
+        let markers = test_fixtures::hex_points(200, 200, 15.0);
+        let d = exact(&markers, 200, 200, 15.0, 0.1);
+        let cell_mm2 = 15.0 * 15.0 * 3f64.sqrt() / 2.0 * 0.01;
+        let v = d[100 * 200 + 100];
+        assert!((v * cell_mm2 - 1.0).abs() < 0.01, "{}", v * cell_mm2);
+    }
+
+    #[test]
+    fn fast_path_stays_close_to_exact() {
+        let markers = test_fixtures::hex_points(160, 120, 15.0);
+        let ex = exact(&markers, 160, 120, 15.0, 0.1);
+        let peak = ex.iter().cloned().fold(0.0, f64::max);
+        for step in [1usize, 2, 4, 8] {
+            let s = setup(160, 120, DensityMode::Fast, step);
+            let f = estimate(&markers, &s, None);
+            let mut worst: f64 = 0.0;
+            for j in 0..f.grid.ny {
+                for i in 0..f.grid.nx {
+                    let p = f.grid.point(i as f64, j as f64);
+                    let want = direct(&markers, p.x, p.y, 15.0, 0.1);
+                    worst = worst.max((f.at(i, j) as f64 - want).abs());
+                }
+            }
+            // Truncation at 3 h drops < 1.2 % of a kernel's mass.
+            assert!(worst < 0.012 * peak, "step {step}: {worst} vs peak {peak}");
+        }
+    }
+
+    #[test]
+    fn roi_limits_the_work_and_matches_inside() {
+        let markers = test_fixtures::hex_points(160, 120, 15.0);
+        let s = setup(160, 120, DensityMode::Fast, 4);
+        let full = estimate(&markers, &s, None);
+        let roi = CellRect {
+            i0: 10,
+            j0: 5,
+            i1: 20,
+            j1: 15,
+        };
+        let part = estimate(&markers, &s, Some(roi));
+        assert_eq!(part.at(15, 10), full.at(15, 10));
+        assert_eq!(part.at(2, 2), 0.0);
+    }
+
+    #[test]
+    fn grid_cells_within_is_clamped() {
+        let g = Grid::new(640, 480, 4);
+        assert_eq!((g.nx, g.ny), (160, 120));
+        assert_eq!(g.coord(0.0), 1.5);
+        let r = g.cells_within(-100.0, -100.0, 1e9, 1e9);
+        assert_eq!(r, g.full());
+        let e = g.cells_within(1e9, 1e9, 2e9, 2e9);
+        assert_eq!(e.area(), 0);
+        let n = g.cells_within(f64::NAN, 0.0, 10.0, 10.0);
+        assert!(n.area() <= g.full().area());
+    }
+}

@@ -1,0 +1,380 @@
+//! Stage 1, frame preparation (Sec. III-B): any 8-bit grey, RGB or RGBA
+//! frame -> grey -> optional crop -> rescale to the working size
+//! (640x480 by default).
+//!
+//! Grey is the BT.601 luma `(77 R + 150 G + 29 B) / 256`. Rescaling maps
+//! pixel centres (`x_in = crop_x + (x_work + 0.5) * sx - 0.5`); an integer
+//! downscale averages `k x k` blocks, any other factor samples bilinearly.
+//! [`Prepared::to_input`] maps working coordinates back to the input image.
+//! The sensing-area mask comes from the rest calibration
+//! ([`crate::calibrate`]).
+
+use crate::params::FrameParams;
+use crate::PointPx;
+
+/// Largest accepted input side, px (a bigger frame is an error, not an OOM).
+pub const MAX_SIDE_PX: usize = 16_384;
+
+/// Errors of frame preparation.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum FrameError {
+    /// Width or height is zero.
+    #[error("empty frame ({width}x{height})")]
+    Empty {
+        /// Width, px.
+        width: usize,
+        /// Height, px.
+        height: usize,
+    },
+    /// A side exceeds [`MAX_SIDE_PX`].
+    #[error("frame {width}x{height} too large (max side {MAX_SIDE_PX} px)")]
+    TooLarge {
+        /// Width, px.
+        width: usize,
+        /// Height, px.
+        height: usize,
+    },
+    /// The buffer length does not match width x height x channels.
+    #[error("buffer has {got} bytes, expected {expected}")]
+    BadLength {
+        /// Bytes expected.
+        expected: usize,
+        /// Bytes given.
+        got: usize,
+    },
+    /// Channel count other than 1, 3 or 4.
+    #[error("unsupported channel count {0} (1, 3 or 4)")]
+    Channels(usize),
+    /// The crop rectangle lies outside the frame.
+    #[error("crop {crop:?} outside the {width}x{height} frame")]
+    Crop {
+        /// The crop `[x, y, w, h]`.
+        crop: [u32; 4],
+        /// Frame width, px.
+        width: usize,
+        /// Frame height, px.
+        height: usize,
+    },
+}
+
+/// An 8-bit grey image, row-major, no padding.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct GreyFrame {
+    width: usize,
+    height: usize,
+    data: Vec<u8>,
+}
+
+impl GreyFrame {
+    /// Wraps a buffer; checks the size.
+    pub fn new(width: usize, height: usize, data: Vec<u8>) -> Result<Self, FrameError> {
+        check_size(width, height)?;
+        if data.len() != width * height {
+            return Err(FrameError::BadLength {
+                expected: width * height,
+                got: data.len(),
+            });
+        }
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Width, px.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height, px.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// Pixels, row-major.
+    pub fn data(&self) -> &[u8] {
+        &self.data
+    }
+
+    /// Pixel at `(x, y)`, 0 outside the image.
+    pub fn get(&self, x: i64, y: i64) -> u8 {
+        if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
+            0
+        } else {
+            self.data[y as usize * self.width + x as usize]
+        }
+    }
+}
+
+fn check_size(width: usize, height: usize) -> Result<(), FrameError> {
+    if width == 0 || height == 0 {
+        return Err(FrameError::Empty { width, height });
+    }
+    if width > MAX_SIDE_PX || height > MAX_SIDE_PX {
+        return Err(FrameError::TooLarge { width, height });
+    }
+    Ok(())
+}
+
+/// A raw camera frame: 1 (grey), 3 (RGB) or 4 (RGBA) interleaved 8-bit
+/// channels.
+#[derive(Debug, Clone, Copy)]
+pub struct RawFrame<'a> {
+    /// Width, px.
+    pub width: usize,
+    /// Height, px.
+    pub height: usize,
+    /// Channels per pixel.
+    pub channels: usize,
+    /// Interleaved pixels, row-major.
+    pub data: &'a [u8],
+}
+
+/// A working-size grey frame and the map back to input pixels.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    /// The working grey frame.
+    pub grey: GreyFrame,
+    /// Input px per working px, x.
+    pub scale_x: f64,
+    /// Input px per working px, y.
+    pub scale_y: f64,
+    /// Crop origin in input px.
+    pub origin_px: PointPx,
+}
+
+impl Prepared {
+    /// Working-frame point -> input-image point (pixel centres at integers).
+    pub fn to_input(&self, p: PointPx) -> PointPx {
+        PointPx::new(
+            self.origin_px.x + (p.x + 0.5) * self.scale_x - 0.5,
+            self.origin_px.y + (p.y + 0.5) * self.scale_y - 0.5,
+        )
+    }
+}
+
+/// Stage 1 entry: grey, crop, rescale to the working size.
+pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, FrameError> {
+    let grey = to_grey(raw)?;
+    let (cx, cy, cw, ch) = match params.crop_px {
+        None => (0, 0, grey.width, grey.height),
+        Some(c) => {
+            let [x, y, w, h] = c.map(|v| v as usize);
+            if w == 0 || h == 0 || x + w > grey.width || y + h > grey.height {
+                return Err(FrameError::Crop {
+                    crop: c,
+                    width: grey.width,
+                    height: grey.height,
+                });
+            }
+            (x, y, w, h)
+        }
+    };
+    let (ow, oh) = (
+        params.work_width_px as usize,
+        params.work_height_px as usize,
+    );
+    check_size(ow, oh)?;
+    let out = resize(&grey, [cx, cy, cw, ch], ow, oh);
+    Ok(Prepared {
+        grey: out,
+        scale_x: cw as f64 / ow as f64,
+        scale_y: ch as f64 / oh as f64,
+        origin_px: PointPx::new(cx as f64, cy as f64),
+    })
+}
+
+/// Converts any supported raw frame to grey (no resize).
+pub fn to_grey(raw: &RawFrame<'_>) -> Result<GreyFrame, FrameError> {
+    check_size(raw.width, raw.height)?;
+    if !matches!(raw.channels, 1 | 3 | 4) {
+        return Err(FrameError::Channels(raw.channels));
+    }
+    let expected = raw.width * raw.height * raw.channels;
+    if raw.data.len() != expected {
+        return Err(FrameError::BadLength {
+            expected,
+            got: raw.data.len(),
+        });
+    }
+    let data = if raw.channels == 1 {
+        raw.data.to_vec()
+    } else {
+        raw.data
+            .chunks_exact(raw.channels)
+            .map(|p| ((77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8) as u8)
+            .collect()
+    };
+    GreyFrame::new(raw.width, raw.height, data)
+}
+
+/// Crops `rect = [x, y, w, h]` (inside `src`) and rescales to `ow x oh`.
+fn resize(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> GreyFrame {
+    let [rx, ry, rw, rh] = rect;
+    let data = if rw == ow && rh == oh {
+        let mut d = Vec::with_capacity(ow * oh);
+        for y in 0..oh {
+            let start = (ry + y) * src.width + rx;
+            d.extend_from_slice(&src.data[start..start + ow]);
+        }
+        d
+    } else if rw % ow == 0 && rh % oh == 0 && rw / ow == rh / oh {
+        block_average(src, rect, rw / ow, ow, oh)
+    } else {
+        bilinear(src, rect, ow, oh)
+    };
+    GreyFrame {
+        width: ow,
+        height: oh,
+        data,
+    }
+}
+
+fn block_average(src: &GreyFrame, rect: [usize; 4], k: usize, ow: usize, oh: usize) -> Vec<u8> {
+    let [rx, ry, ..] = rect;
+    let mut sums = vec![0u32; ow];
+    let mut out = Vec::with_capacity(ow * oh);
+    let n = (k * k) as u32;
+    for y in 0..oh {
+        sums.iter_mut().for_each(|s| *s = 0);
+        for dy in 0..k {
+            let row = &src.data[(ry + y * k + dy) * src.width + rx..][..ow * k];
+            for (s, block) in sums.iter_mut().zip(row.chunks_exact(k)) {
+                *s += block.iter().map(|&v| v as u32).sum::<u32>();
+            }
+        }
+        out.extend(sums.iter().map(|&s| ((s + n / 2) / n) as u8));
+    }
+    out
+}
+
+fn bilinear(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
+    let [rx, ry, rw, rh] = rect;
+    let sx = rw as f64 / ow as f64;
+    let sy = rh as f64 / oh as f64;
+    let mut out = Vec::with_capacity(ow * oh);
+    let max_x = (rw - 1) as f64;
+    let max_y = (rh - 1) as f64;
+    for y in 0..oh {
+        let fy = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, max_y);
+        let y0 = fy.floor() as usize;
+        let y1 = (y0 + 1).min(rh - 1);
+        let ty = fy - y0 as f64;
+        for x in 0..ow {
+            let fx = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, max_x);
+            let x0 = fx.floor() as usize;
+            let x1 = (x0 + 1).min(rw - 1);
+            let tx = fx - x0 as f64;
+            let at = |xx: usize, yy: usize| src.data[(ry + yy) * src.width + rx + xx] as f64;
+            let top = at(x0, y0) * (1.0 - tx) + at(x1, y0) * tx;
+            let bottom = at(x0, y1) * (1.0 - tx) + at(x1, y1) * tx;
+            out.push((top * (1.0 - ty) + bottom * ty).round().clamp(0.0, 255.0) as u8);
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn params(w: u32, h: u32) -> FrameParams {
+        FrameParams {
+            work_width_px: w,
+            work_height_px: h,
+            ..FrameParams::default()
+        }
+    }
+
+    #[test]
+    fn rgb_becomes_luma() {
+        let data = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+        let raw = RawFrame {
+            width: 4,
+            height: 1,
+            channels: 3,
+            data: &data,
+        };
+        let g = to_grey(&raw).unwrap();
+        assert_eq!(g.data(), &[76, 149, 28, 255]);
+    }
+
+    #[test]
+    fn bad_buffers_are_typed_errors() {
+        let raw = |w, h, c, d: &'static [u8]| RawFrame {
+            width: w,
+            height: h,
+            channels: c,
+            data: d,
+        };
+        assert!(matches!(
+            to_grey(&raw(0, 5, 1, &[])),
+            Err(FrameError::Empty { .. })
+        ));
+        assert!(matches!(
+            to_grey(&raw(2, 2, 1, &[1, 2, 3])),
+            Err(FrameError::BadLength { .. })
+        ));
+        assert!(matches!(
+            to_grey(&raw(1, 1, 2, &[1, 2])),
+            Err(FrameError::Channels(2))
+        ));
+        assert!(matches!(
+            to_grey(&raw(MAX_SIDE_PX + 1, 1, 1, &[])),
+            Err(FrameError::TooLarge { .. })
+        ));
+    }
+
+    #[test]
+    fn halving_averages_blocks_and_maps_back() {
+        let data: Vec<u8> = (0..16).map(|i| (i * 10) as u8).collect();
+        let raw = RawFrame {
+            width: 4,
+            height: 4,
+            channels: 1,
+            data: &data,
+        };
+        let p = prepare(&raw, &params(2, 2)).unwrap();
+        assert_eq!(p.grey.data(), &[25, 45, 105, 125]);
+        let q = p.to_input(PointPx::new(0.0, 0.0));
+        assert_eq!(q, PointPx::new(0.5, 0.5));
+    }
+
+    #[test]
+    fn same_size_is_identity_and_crop_is_checked() {
+        let data: Vec<u8> = (0..12).collect();
+        let raw = RawFrame {
+            width: 4,
+            height: 3,
+            channels: 1,
+            data: &data,
+        };
+        let p = prepare(&raw, &params(4, 3)).unwrap();
+        assert_eq!(p.grey.data(), &data[..]);
+        assert_eq!(p.to_input(PointPx::new(2.0, 1.0)), PointPx::new(2.0, 1.0));
+        let mut fp = params(2, 2);
+        fp.crop_px = Some([1, 1, 2, 2]);
+        let c = prepare(&raw, &fp).unwrap();
+        assert_eq!(c.grey.data(), &[5, 6, 9, 10]);
+        assert_eq!(c.to_input(PointPx::new(0.0, 0.0)), PointPx::new(1.0, 1.0));
+        fp.crop_px = Some([3, 0, 2, 2]);
+        assert!(matches!(prepare(&raw, &fp), Err(FrameError::Crop { .. })));
+    }
+
+    #[test]
+    fn upscale_is_bilinear_and_bounded() {
+        let data = [0u8, 255];
+        let raw = RawFrame {
+            width: 2,
+            height: 1,
+            channels: 1,
+            data: &data,
+        };
+        let p = prepare(&raw, &params(4, 2)).unwrap();
+        assert_eq!(p.grey.width(), 4);
+        assert_eq!(p.grey.data()[0], 0);
+        assert_eq!(p.grey.data()[3], 255);
+        assert!(p.grey.data()[1] > 0 && p.grey.data()[1] < 128);
+    }
+}

@@ -1,0 +1,458 @@
+//! Stage 2, markers (Sec. III-B): Determinant-of-Hessian blob detection
+//! (SURF-style box filters on an integral image), bright-blob check and
+//! sub-pixel centroids.
+//!
+//! For a box-filter lobe `l` (odd; filter size `3l`, Gaussian-equivalent
+//! sigma ~ `0.4 l`) the second derivatives at `(x, y)` are box sums over the
+//! integral image `I(x, y) = sum_{x' < x, y' < y} img(x', y')`:
+//! `Dyy = box(2l-1 wide, 3l tall) - 3 box(2l-1 wide, l tall)`, `Dxx` its
+//! transpose, `Dxy = TL + BR - TR - BL` (four `l x l` boxes). With each
+//! divided by the lobe area `l (2l - 1)`, the blob strength is
+//! `sqrt(Dxx Dyy - (0.9 Dxy)^2)` (grey levels) where `Dxx < 0` and `Dyy < 0`
+//! (a bright blob), else 0. Local maxima above the threshold are refined on
+//! the full-resolution frame by a half-maximum intensity centroid.
+//!
+//! The scale (lobe, and whether to detect on a 2x2-binned image for speed)
+//! is found from a rest frame by [`auto_detector`]; the config can override
+//! it. Markers closer than `(3l - 1) / 2` detection pixels to the image
+//! border are not detected.
+
+use crate::frame::GreyFrame;
+use crate::params::MarkerParams;
+use crate::PointPx;
+
+/// Candidate full-resolution lobes for the automatic scale search.
+const AUTO_LOBES_PX: [usize; 7] = [3, 5, 7, 9, 11, 13, 15];
+/// Weight of `Dxy` in the determinant (SURF: box vs Gaussian filter norms).
+const DXY_WEIGHT: f32 = 0.9;
+
+/// Errors of the automatic scale search.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum MarkerError {
+    /// The rest frame has too few marker-like blobs to calibrate.
+    #[error("rest frame has {found} marker-like blobs; need at least {needed}")]
+    TooFewMarkers {
+        /// Blobs found.
+        found: usize,
+        /// Blobs needed.
+        needed: usize,
+    },
+    /// The frame is smaller than the box filters.
+    #[error("frame {width}x{height} is too small for marker detection")]
+    TooSmall {
+        /// Width, px.
+        width: usize,
+        /// Height, px.
+        height: usize,
+    },
+}
+
+/// One detected marker.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Marker {
+    /// Sub-pixel centroid, working px.
+    pub pos: PointPx,
+    /// Blob strength (sqrt of the determinant of Hessian), grey levels.
+    pub strength: f32,
+}
+
+/// The markers of one frame.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Markers {
+    /// Detected markers, in raster order of their detection maxima.
+    pub list: Vec<Marker>,
+}
+
+impl Markers {
+    /// Number of markers.
+    pub fn len(&self) -> usize {
+        self.list.len()
+    }
+
+    /// True when no marker was found.
+    pub fn is_empty(&self) -> bool {
+        self.list.is_empty()
+    }
+
+    /// Marker positions.
+    pub fn positions(&self) -> Vec<PointPx> {
+        self.list.iter().map(|m| m.pos).collect()
+    }
+}
+
+/// A configured detector (from [`auto_detector`] or built by hand).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Detector {
+    /// Box-filter lobe on the detection image (odd, >= 3).
+    pub lobe_px: usize,
+    /// Detect on a 2x2-binned image (`2`) or at full resolution (`1`).
+    pub bin: usize,
+    /// Minimum blob strength, grey levels.
+    pub min_strength: f32,
+    /// Minimum contrast over the local background, grey levels.
+    pub min_contrast: f32,
+    /// Estimated marker radius, working px (sets the centroid window).
+    pub radius_px: f64,
+}
+
+/// Stage 2 entry: detects the markers of a working frame.
+pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
+    let binned;
+    let (img, w, h) = if det.bin == 2 && frame.width() >= 2 && frame.height() >= 2 {
+        binned = bin2(frame);
+        (&binned[..], frame.width() / 2, frame.height() / 2)
+    } else {
+        (frame.data(), frame.width(), frame.height())
+    };
+    let bin = if img.len() == frame.data().len() {
+        1
+    } else {
+        2
+    };
+    let lobe = det.lobe_px.max(3) | 1;
+    let det_map = determinant_map(img, w, h, lobe, 1);
+    let mut list = Vec::new();
+    let min_det = det.min_strength * det.min_strength;
+    for (x, y, d) in local_maxima(&det_map, w, h, min_det) {
+        let s = d.sqrt();
+        let guess = PointPx::new(
+            (x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+            (y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+        );
+        if let Some(pos) = refine(frame, guess, det.radius_px, det.min_contrast) {
+            list.push(Marker { pos, strength: s });
+        }
+    }
+    Markers { list }
+}
+
+/// Finds the marker scale and threshold from a rest (no-contact) frame.
+/// `params.lobe_px` / `params.binned` override the search.
+pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector, MarkerError> {
+    let (w, h) = (rest.width(), rest.height());
+    if w < 16 || h < 16 {
+        return Err(MarkerError::TooSmall {
+            width: w,
+            height: h,
+        });
+    }
+    let full_lobe = match params.lobe_px {
+        Some(l) => l as usize,
+        None => {
+            let mut best = (3, f32::MIN);
+            for &l in AUTO_LOBES_PX.iter().filter(|&&l| 3 * l + 2 < w.min(h)) {
+                let map = strength_map(rest.data(), w, h, l, 2);
+                let score = percentile(map.into_iter().filter(|&s| s > 0.0).collect(), 0.98);
+                if score > best.1 {
+                    best = (l, score);
+                }
+            }
+            best.0
+        }
+    };
+    let binned = params.binned.unwrap_or(full_lobe >= 5) && w >= 32 && h >= 32;
+    let (bin, lobe_px) = if binned {
+        let half = full_lobe as f64 / 2.0;
+        (
+            2,
+            (2.0 * ((half - 1.0) / 2.0).round() + 1.0).max(3.0) as usize,
+        )
+    } else {
+        (1, full_lobe)
+    };
+    let mut det = Detector {
+        lobe_px,
+        bin,
+        min_strength: 1e-3,
+        min_contrast: params.min_contrast,
+        radius_px: 0.4 * full_lobe as f64 * std::f64::consts::SQRT_2,
+    };
+    let all = detect(rest, &det);
+    let strengths: Vec<f32> = all.list.iter().map(|m| m.strength).collect();
+    let needed = 3;
+    if strengths.len() < needed {
+        return Err(MarkerError::TooFewMarkers {
+            found: strengths.len(),
+            needed,
+        });
+    }
+    det.min_strength = params.strength_ratio * percentile(strengths, 0.9);
+    Ok(det)
+}
+
+/// Value at quantile `q` (0..=1) of `v` (0 for an empty vector).
+fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let k = ((v.len() - 1) as f64 * q).round() as usize;
+    let (_, x, _) = v.select_nth_unstable_by(k, f32::total_cmp);
+    *x
+}
+
+/// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.
+fn bin2(frame: &GreyFrame) -> Vec<u8> {
+    let (w, h) = (frame.width() / 2, frame.height() / 2);
+    let src = frame.data();
+    let fw = frame.width();
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        let r0 = &src[2 * y * fw..][..2 * w];
+        let r1 = &src[(2 * y + 1) * fw..][..2 * w];
+        out.extend(
+            r0.chunks_exact(2)
+                .zip(r1.chunks_exact(2))
+                .map(|(a, b)| ((a[0] as u16 + a[1] as u16 + b[0] as u16 + b[1] as u16) >> 2) as u8),
+        );
+    }
+    out
+}
+
+/// Integral image with one zero row and column in front, wrapping `u32`
+/// (box sums stay exact while a box holds < 2^32 / 255 pixels).
+pub fn integral(img: &[u8], w: usize, h: usize) -> Vec<u32> {
+    let stride = w + 1;
+    let mut ii = vec![0u32; stride * (h + 1)];
+    for y in 0..h {
+        let mut run = 0u32;
+        let (prev, cur) = ii.split_at_mut((y + 1) * stride);
+        let prev = &prev[y * stride..];
+        let cur = &mut cur[..stride];
+        for x in 0..w {
+            run = run.wrapping_add(img[y * w + x] as u32);
+            cur[x + 1] = prev[x + 1].wrapping_add(run);
+        }
+    }
+    ii
+}
+
+/// Blob-strength map (see the module doc); evaluated every `step` pixels
+/// (others and the border are 0).
+fn strength_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
+    let mut out = determinant_map(img, w, h, lobe, step);
+    out.iter_mut().for_each(|v| *v = v.sqrt());
+    out
+}
+
+/// Determinant of the box Hessian of bright blobs (0 elsewhere): the square
+/// of the blob strength. Every `step` pixels; the border is 0.
+fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
+    let mut out = vec![0f32; w * h];
+    let m = (3 * lobe - 1) / 2;
+    if w <= 2 * m + 1 || h <= 2 * m + 1 {
+        return out;
+    }
+    let ii = integral(img, w, h);
+    let s = w + 1;
+    let l = lobe as isize;
+    let half = (l - 1) / 2;
+    let inv_area = 1.0 / (lobe * (2 * lobe - 1)) as f32;
+    let n = w - 2 * m;
+    // Boxes as [x0, y0, x1, y1) offsets from the centre pixel.
+    let boxes: [[isize; 4]; 8] = [
+        [1 - l, -half - l, l, half + l + 1], // Dyy outer
+        [1 - l, -half, l, half + 1],         // Dyy middle
+        [-half - l, 1 - l, half + l + 1, l], // Dxx outer
+        [-half, 1 - l, half + 1, l],         // Dxx middle
+        [-l, -l, 0, 0],                      // Dxy top-left
+        [1, 1, l + 1, l + 1],                // Dxy bottom-right
+        [1, -l, l + 1, 0],                   // Dxy top-right
+        [-l, 1, 0, l + 1],                   // Dxy bottom-left
+    ];
+    let mut sums = vec![vec![0i32; n]; 8];
+    for y in (m..h - m).step_by(step) {
+        for (b, sum) in boxes.iter().zip(sums.iter_mut()) {
+            // Corner rows, each sliced to the n centre columns of this row.
+            let at = |dx: isize, dy: isize| {
+                let start = ((y as isize + dy) * s as isize + m as isize + dx) as usize;
+                &ii[start..start + n]
+            };
+            let (a, bb, c, d) = (
+                at(b[2], b[3]),
+                at(b[2], b[1]),
+                at(b[0], b[3]),
+                at(b[0], b[1]),
+            );
+            for ((((o, &a), &bb), &c), &d) in sum.iter_mut().zip(a).zip(bb).zip(c).zip(d) {
+                *o = a.wrapping_sub(bb).wrapping_sub(c).wrapping_add(d) as i32;
+            }
+        }
+        let row = &mut out[y * w + m..y * w + m + n];
+        for (k, o) in row.iter_mut().enumerate().step_by(step) {
+            let dyy = sums[0][k] - 3 * sums[1][k];
+            let dxx = sums[2][k] - 3 * sums[3][k];
+            let dxy = sums[4][k] + sums[5][k] - sums[6][k] - sums[7][k];
+            if dxx < 0 && dyy < 0 {
+                let fxy = dxy as f32 * inv_area * DXY_WEIGHT;
+                let det = (dxx as f32 * inv_area) * (dyy as f32 * inv_area) - fxy * fxy;
+                *o = det.max(0.0);
+            }
+        }
+    }
+    out
+}
+
+/// Strict 3x3 local maxima above `min` (ties go to the first in raster order).
+fn local_maxima(map: &[f32], w: usize, h: usize, min: f32) -> Vec<(usize, usize, f32)> {
+    let mut out = Vec::new();
+    for y in 1..h.saturating_sub(1) {
+        let (up, row, down) = (
+            &map[(y - 1) * w..y * w],
+            &map[y * w..(y + 1) * w],
+            &map[(y + 1) * w..(y + 2) * w],
+        );
+        for x in 1..w - 1 {
+            let v = row[x];
+            if v <= min {
+                continue;
+            }
+            if v > up[x - 1]
+                && v > up[x]
+                && v > up[x + 1]
+                && v > row[x - 1]
+                && v >= row[x + 1]
+                && v >= down[x - 1]
+                && v >= down[x]
+                && v >= down[x + 1]
+            {
+                out.push((x, y, v));
+            }
+        }
+    }
+    out
+}
+
+/// Half-maximum intensity centroid in a window around `guess` (large
+/// enough for the marker when the guess is within 1.5 px). `None` when the
+/// contrast is below `min_contrast` or the window leaves the image.
+fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
+    let rw = (radius_px + 1.5).ceil() as i64 + 1;
+    let (cx, cy) = (guess.x.round() as i64, guess.y.round() as i64);
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    let (x0, x1) = ((cx - rw).max(0), (cx + rw).min(w - 1));
+    let (y0, y1) = ((cy - rw).max(0), (cy + rw).min(h - 1));
+    if x0 > x1 || y0 > y1 {
+        return None;
+    }
+    let data = frame.data();
+    let row = |y: i64| &data[(y * w + x0) as usize..=(y * w + x1) as usize];
+    let (mut lo, mut hi) = (u8::MAX, 0u8);
+    for y in y0..=y1 {
+        for &v in row(y) {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let contrast = hi as f32 - lo as f32;
+    if contrast < min_contrast.max(1.0) {
+        return None;
+    }
+    let cut = lo as i32 + ((hi as i32 - lo as i32) >> 1);
+    let (mut sw, mut sx, mut sy) = (0i64, 0i64, 0i64);
+    for y in y0..=y1 {
+        let mut rw_sum = 0i64;
+        let mut rx_sum = 0i64;
+        for (k, &v) in row(y).iter().enumerate() {
+            let wgt = (v as i32 - cut).max(0) as i64;
+            rw_sum += wgt;
+            rx_sum += wgt * k as i64;
+        }
+        sw += rw_sum;
+        sx += rx_sum;
+        sy += rw_sum * y;
+    }
+    if sw <= 0 {
+        return None;
+    }
+    let c = PointPx::new(x0 as f64 + sx as f64 / sw as f64, sy as f64 / sw as f64);
+    ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64).then_some(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{rest_frame, Category};
+    use crate::test_fixtures;
+
+    #[test]
+    fn integral_image_box_sums_match_direct_sums() {
+        let img: Vec<u8> = (0..35).map(|i| (i * 37 % 251) as u8).collect();
+        let ii = integral(&img, 7, 5);
+        let direct: u32 = (1..4)
+            .flat_map(|y| (2..6).map(move |x| (x, y)))
+            .map(|(x, y)| img[y * 7 + x] as u32)
+            .sum();
+        let s = 8;
+        let boxed = ii[4 * s + 6]
+            .wrapping_sub(ii[s + 6])
+            .wrapping_sub(ii[4 * s + 2])
+            .wrapping_add(ii[s + 2]);
+        assert_eq!(boxed, direct);
+    }
+
+    #[test]
+    fn finds_every_synthetic_marker_with_subpixel_accuracy() {
+        let (rest, det) = test_fixtures::nominal_rest_and_detector();
+        let found = detect(&rest.image, &det);
+        let truth = &rest.markers;
+        let matched = test_fixtures::match_points(&found.positions(), truth, 3.0);
+        assert!(
+            matched.len() as f64 >= 0.97 * truth.len() as f64,
+            "{} of {}",
+            matched.len(),
+            truth.len()
+        );
+        assert!(
+            found.len() <= truth.len() + 3,
+            "{} false blobs",
+            found.len() - truth.len()
+        );
+        let mut err: Vec<f64> = matched.iter().map(|&(_, _, d)| d).collect();
+        err.sort_by(f64::total_cmp);
+        let median = err[err.len() / 2];
+        assert!(median < 0.25, "median centroid error {median} px");
+    }
+
+    #[test]
+    fn auto_scale_follows_marker_size() {
+        let mut small = Category::Nominal.sensor(640, 480, 3);
+        small.marker_diameter_px = 4.0;
+        small.pitch_px = 12.0;
+        let mut big = small.clone();
+        big.marker_diameter_px = 12.0;
+        big.pitch_px = 24.0;
+        let ds = auto_detector(&rest_frame(&small, 1).image, &MarkerParams::default()).unwrap();
+        let db = auto_detector(&rest_frame(&big, 1).image, &MarkerParams::default()).unwrap();
+        assert!(ds.radius_px < db.radius_px, "{ds:?} vs {db:?}");
+        for (sensor, det) in [(small, ds), (big, db)] {
+            let rest = rest_frame(&sensor, 2);
+            let found = detect(&rest.image, &det);
+            let matched = test_fixtures::match_points(&found.positions(), &rest.markers, 3.0);
+            assert!(
+                matched.len() as f64 >= 0.95 * rest.markers.len() as f64,
+                "{det:?}: {} of {}",
+                matched.len(),
+                rest.markers.len()
+            );
+        }
+    }
+
+    #[test]
+    fn blank_frame_has_no_markers_and_no_calibration() {
+        for level in [0u8, 128, 255] {
+            let frame = GreyFrame::new(64, 48, vec![level; 64 * 48]).unwrap();
+            let det = Detector {
+                lobe_px: 3,
+                bin: 1,
+                min_strength: 1.0,
+                min_contrast: 6.0,
+                radius_px: 3.0,
+            };
+            assert!(detect(&frame, &det).is_empty());
+            assert!(matches!(
+                auto_detector(&frame, &MarkerParams::default()),
+                Err(MarkerError::TooFewMarkers { .. })
+            ));
+        }
+    }
+}

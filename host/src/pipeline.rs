@@ -1,0 +1,288 @@
+//! The per-frame tactile pipeline: markers -> tracking -> (skip?) ->
+//! density in a region of interest -> contact, with single-thread wall-clock
+//! times per stage.
+//!
+//! Skipping what a scene doesn't need:
+//! - when fewer than `min_moved_markers` rest markers moved beyond
+//!   `move_noise_px` (or were lost), the frame has no contact and the density
+//!   and segmentation stages do not run (`skip_unmoved`);
+//! - otherwise the fast density path only computes the grid cells within
+//!   `2 h` of the moved markers (the exact reference computes everything).
+//!
+//! With `skip_unmoved = false` neither shortcut is taken (every frame gets
+//! the full density grid), which is how the saving is measured.
+
+use std::time::Instant;
+
+use crate::calibrate::Calibration;
+use crate::contact::{self, Contact};
+use crate::density::{self, CellRect};
+use crate::frame::GreyFrame;
+use crate::markers::{self, Markers};
+use crate::params::{DensityMode, Params};
+use crate::tracking::{self, Field};
+use crate::PointPx;
+
+/// Errors of the per-frame pipeline.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PipelineError {
+    /// The working frame does not have the calibration's size.
+    #[error("frame is {got_w}x{got_h}, calibration is {want_w}x{want_h}")]
+    SizeMismatch {
+        /// Frame width, px.
+        got_w: usize,
+        /// Frame height, px.
+        got_h: usize,
+        /// Calibrated width, px.
+        want_w: usize,
+        /// Calibrated height, px.
+        want_h: usize,
+    },
+}
+
+/// Wall-clock time per stage, ms (single thread).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StageTimes {
+    /// Marker detection.
+    pub detect_ms: f64,
+    /// Tracking against rest and the kernel density.
+    pub kde_ms: f64,
+    /// Region, centre and contact.
+    pub segment_ms: f64,
+    /// Whole frame (from the working grey frame to the contact).
+    pub total_ms: f64,
+}
+
+/// The result of one frame.
+#[derive(Debug, Clone)]
+pub struct FrameResult {
+    /// Detected markers.
+    pub markers: Markers,
+    /// Displacement field against the rest markers.
+    pub field: Field,
+    /// The contact, if any (working px).
+    pub contact: Option<Contact>,
+    /// True when the density stages were skipped (nothing moved).
+    pub skipped: bool,
+    /// Density grid cells computed.
+    pub density_cells: usize,
+    /// Stage times.
+    pub times: StageTimes,
+}
+
+/// A calibrated pipeline for one sensor.
+#[derive(Debug, Clone)]
+pub struct Pipeline {
+    /// The rest calibration.
+    pub calibration: Calibration,
+    /// The parameters.
+    pub params: Params,
+}
+
+impl Pipeline {
+    /// A pipeline from a calibration and the parameters it was made with.
+    pub fn new(calibration: Calibration, params: Params) -> Self {
+        Self {
+            calibration,
+            params,
+        }
+    }
+
+    /// Runs all stages on one working frame.
+    pub fn run(&self, frame: &GreyFrame) -> Result<FrameResult, PipelineError> {
+        let cal = &self.calibration;
+        if (frame.width(), frame.height()) != (cal.width, cal.height) {
+            return Err(PipelineError::SizeMismatch {
+                got_w: frame.width(),
+                got_h: frame.height(),
+                want_w: cal.width,
+                want_h: cal.height,
+            });
+        }
+        let cp = &self.params.contact;
+        let t0 = Instant::now();
+        let markers = markers::detect(frame, &cal.detector);
+        let t1 = Instant::now();
+        let positions = markers.positions();
+        let field = tracking::track(
+            &cal.rest_markers,
+            &positions,
+            cal.width,
+            cal.height,
+            0.5 * cal.pitch_px,
+            cp.move_noise_px,
+        );
+        let skipped = cp.skip_unmoved && field.moved.len() < cp.min_moved_markers;
+        let mut density_cells = 0;
+        let mut region = None;
+        let mut t2 = Instant::now();
+        if !skipped {
+            let roi = match cal.density.mode {
+                DensityMode::Exact => None,
+                DensityMode::Fast => Some(self.roi(&field)),
+            };
+            let map = density::estimate(&positions, &cal.density, roi);
+            density_cells = map.roi.area();
+            t2 = Instant::now();
+            region = contact::segment(
+                &map,
+                &cal.rest_density,
+                &cal.mask,
+                cp,
+                cal.density.mm_per_px,
+            );
+        }
+        let contact = if skipped {
+            None
+        } else {
+            contact::locate(
+                region,
+                &cal.rest_markers,
+                &field,
+                cal.pitch_px,
+                cp,
+                cal.density.mm_per_px,
+            )
+        };
+        let t3 = Instant::now();
+        let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
+        Ok(FrameResult {
+            markers,
+            field,
+            contact,
+            skipped,
+            density_cells,
+            times: StageTimes {
+                detect_ms: ms(t0, t1),
+                kde_ms: ms(t1, t2),
+                segment_ms: ms(t2, t3),
+                total_ms: ms(t0, t3),
+            },
+        })
+    }
+
+    /// Grid cells within `2 h` of any moved rest marker or its new position.
+    fn roi(&self, field: &Field) -> CellRect {
+        let cal = &self.calibration;
+        let grid = cal.density.grid();
+        if !self.params.contact.skip_unmoved || field.moved.is_empty() {
+            return grid.full();
+        }
+        let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        let mut grow = |p: PointPx| {
+            x0 = x0.min(p.x);
+            y0 = y0.min(p.y);
+            x1 = x1.max(p.x);
+            y1 = y1.max(p.y);
+        };
+        for &n in &field.moved {
+            let r = cal.rest_markers[n];
+            grow(r);
+            if let Some(u) = field.displacement[n] {
+                grow(PointPx::new(r.x + u.x, r.y + u.y));
+            }
+        }
+        let m = 2.0 * cal.density.h_px;
+        grid.cells_within(x0 - m, y0 - m, x1 + m, y1 + m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{self, Category};
+    use crate::test_fixtures;
+
+    /// Centre errors (px) of `frames` scenes of `cat`; `None` = no contact.
+    fn errors(cat: Category, params: &Params, frames: u64) -> Vec<Option<f64>> {
+        let cal = test_fixtures::calibrated(cat, 640, 480, params);
+        let sensor = cat.sensor(640, 480, 5);
+        let p = Pipeline::new(cal, params.clone());
+        (0..frames)
+            .map(|k| {
+                let f = synth::render(&cat.scene(&sensor, 100 + k));
+                let r = p.run(&f.image).unwrap();
+                r.contact.map(|c| {
+                    f.contacts
+                        .iter()
+                        .map(|t| (t.x - c.centre.x).hypot(t.y - c.centre.y))
+                        .fold(f64::INFINITY, f64::min)
+                })
+            })
+            .collect()
+    }
+
+    fn check_accuracy(cat: Category, median_px: f64, max_px: f64) {
+        let e = errors(cat, &Params::default(), 5);
+        let mut found: Vec<f64> = e.iter().flatten().copied().collect();
+        assert_eq!(found.len(), e.len(), "{cat:?}: contacts missed: {e:?}");
+        found.sort_by(f64::total_cmp);
+        let med = found[found.len() / 2];
+        let max = found[found.len() - 1];
+        assert!(med <= median_px && max <= max_px, "{cat:?}: {found:?}");
+    }
+
+    #[test]
+    fn nominal_contacts_within_one_pixel() {
+        check_accuracy(Category::Nominal, 1.0, 5.0);
+    }
+
+    #[test]
+    fn edge_contacts_within_one_pixel() {
+        check_accuracy(Category::Edge, 1.0, 5.0);
+    }
+
+    #[test]
+    fn large_contacts_within_two_pixels() {
+        check_accuracy(Category::Large, 2.0, 5.0);
+    }
+
+    #[test]
+    fn dropout_and_degraded_frames_still_locate_the_contact() {
+        check_accuracy(Category::Dropout, 1.0, 5.0);
+        check_accuracy(Category::Degraded, 1.0, 5.0);
+    }
+
+    #[test]
+    fn small_contacts_are_found_by_tracking_only() {
+        let e = errors(Category::Small, &Params::default(), 6);
+        let found: Vec<f64> = e.iter().flatten().copied().collect();
+        assert!(found.len() >= 4, "{e:?}");
+        assert!(found.iter().all(|&d| d < 2.0), "{e:?}");
+        let mut density_only = Params::default();
+        density_only.contact.centre = crate::params::CentreMethod::Density;
+        let e = errors(Category::Small, &density_only, 6);
+        assert!(e.iter().all(Option::is_none), "density alone sees {e:?}");
+    }
+
+    #[test]
+    fn no_contact_frames_are_skipped_without_false_contacts() {
+        let cat = Category::NoContact;
+        let params = Params::default();
+        let cal = test_fixtures::calibrated(cat, 640, 480, &params);
+        let sensor = cat.sensor(640, 480, 5);
+        let p = Pipeline::new(cal, params);
+        for k in 0..5 {
+            let f = synth::render(&cat.scene(&sensor, 200 + k));
+            let r = p.run(&f.image).unwrap();
+            assert!(r.contact.is_none());
+            assert!(
+                r.skipped && r.density_cells == 0,
+                "frame {k}: {:?}",
+                r.field.moved
+            );
+        }
+    }
+
+    #[test]
+    fn wrong_frame_size_is_an_error() {
+        let params = Params::default();
+        let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
+        let p = Pipeline::new(cal, params);
+        let small = GreyFrame::new(320, 240, vec![0; 320 * 240]).unwrap();
+        assert!(matches!(
+            p.run(&small),
+            Err(PipelineError::SizeMismatch { .. })
+        ));
+    }
+}
