@@ -66,6 +66,8 @@ use adc_sensors as sensors;
 mod model_sensors;
 #[cfg(feature = "qemu")]
 use model_sensors as sensors;
+#[cfg(feature = "qemu-cost")]
+mod cost;
 
 /// Baud rate of the host link (USART1).
 pub const BAUD_RATE: u32 = 115_200;
@@ -226,6 +228,8 @@ fn clock_config() -> rcc::Config {
 
 /// Sets up the board and runs the control loop forever.
 pub fn run() -> ! {
+    #[cfg(feature = "qemu-cost")]
+    cost::paint_stack();
     // Both `take`s succeed: this is the only call, right after reset.
     let (Some(dp), Some(cp)) = (pac::Peripherals::take(), cortex_m::Peripherals::take()) else {
         defmt::error!("peripherals already taken");
@@ -343,6 +347,8 @@ fn control_loop<S: sensors::TankSensors>(
 ) -> ! {
     let mut last_ms = io.now_ms();
     let mut rx_chunk = [0u8; RX_CHUNK_LEN];
+    #[cfg(feature = "qemu-cost")]
+    let mut meter = cost::Meter::new(controller, io, tx_queue);
     loop {
         if let Some(byte) = tx_queue.peek() {
             if serial_tx.write_u8(byte).is_ok() {
@@ -355,8 +361,19 @@ fn control_loop<S: sensors::TankSensors>(
         }
         last_ms = now_ms;
         let n = critical_section::with(|cs| RX_QUEUE.borrow_ref_mut(cs).pop_into(&mut rx_chunk));
+        #[cfg(feature = "qemu-cost")]
+        let (start, script) = (
+            cortex_m::peripheral::SYST::get_current(),
+            meter.scripted_input(now_ms),
+        );
+        #[cfg(feature = "qemu-cost")]
+        if let Some(frame) = &script {
+            controller.receive(frame, io, tx_queue);
+        }
         controller.receive(rx_chunk.get(..n).unwrap_or(&[]), io, tx_queue);
         controller.tick(io, tx_queue);
+        #[cfg(feature = "qemu-cost")]
+        meter.record(start);
         watchdog.feed();
     }
 }

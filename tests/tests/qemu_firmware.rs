@@ -64,9 +64,13 @@ fn qemu_available() -> bool {
             !required,
             "qemu-system-arm not found, and DEXITAC_REQUIRE_QEMU=1 requires this test to run"
         );
-        eprintln!(
-            "SKIPPED qemu_firmware: qemu-system-arm not found (apt-get install qemu-system-arm)"
-        );
+        // Straight to stderr, past libtest's output capture, so the skip
+        // shows in a normal `cargo test` run.
+        let note = "SKIPPED qemu_firmware: qemu-system-arm not found \
+                    (apt-get install qemu-system-arm; DEXITAC_REQUIRE_QEMU=1 makes this a failure)\n";
+        if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
+            panic!("cannot report the skip: {e}");
+        }
     }
     found
 }
