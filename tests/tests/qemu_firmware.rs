@@ -27,7 +27,7 @@ use dexitac_protocol::{
 use serialport::TTYPort;
 
 /// The firmware's host-silence deadline (its default configuration).
-const SILENCE_MS: u64 = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS as u64;
+const SILENCE_MS: u32 = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS;
 
 /// Kills QEMU on every path out of the test, panics included.
 struct Qemu(Child);
@@ -327,7 +327,7 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
 
     let stream = host.telemetry.clone();
     assert!(
-        stream.len() >= 40,
+        stream.len() >= 25,
         "{} telemetry frames in 1.5 s",
         stream.len()
     );
@@ -347,11 +347,14 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
         stream.len(),
         last.loop_overruns
     );
-    // Firmware time runs at wall-clock speed (SysTick at 1 kHz).
+    // Firmware time runs at about wall-clock speed (SysTick at 1 kHz). The
+    // bound is loose: when the machine is busy, QEMU's SysTick drops periods
+    // and firmware time falls behind (ratios down to 0.58 seen on a loaded
+    // 2-core machine); a wrong core-clock constant would be off 3x.
     let mcu_ms = f64::from(last.time_ms - first.time_ms);
     let wall_ms = (last_at - first_at).as_secs_f64() * 1e3;
     assert!(
-        (mcu_ms / wall_ms - 1.0).abs() < 0.15,
+        (0.4..1.5).contains(&(mcu_ms / wall_ms)),
         "firmware ms {mcu_ms} vs wall ms {wall_ms}"
     );
     assert_eq!(last.state, ArmState::Armed);
@@ -367,14 +370,16 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     assert!(stream.iter().any(|(_, t)| t.positive_pump_on));
 
     // A malformed frame (valid CRC, valve state 7) is nacked, a corrupted
-    // one dropped; neither actuates anything.
+    // one dropped; neither actuates anything. (Neither counts as a sign of
+    // life either, so heartbeats go in between.)
+    host.ack(HostMsg::Heartbeat);
     let seq = host.seq.wrapping_add(1);
     host.seq = seq;
     let [lo, hi] = seq.to_le_bytes();
     let mut body = vec![PROTOCOL_VERSION, lo, hi, 2, 7];
     body.extend_from_slice(&[1; CHAMBER_COUNT - 1]);
     host.write(&frame_with_valid_crc(&body));
-    let replies = host.pump(Duration::from_millis(200));
+    let replies = host.pump(Duration::from_millis(150));
     assert!(
         replies.contains(&McuMsg::Nack {
             seq,
@@ -382,6 +387,7 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
         }),
         "{replies:?}"
     );
+    host.ack(HostMsg::Heartbeat);
     let mut corrupted = EncodedFrame::new(
         host.seq.wrapping_add(1),
         &HostMsg::SetChambers {
@@ -393,28 +399,52 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     corrupted[5] ^= 0x04;
     host.write(&corrupted);
     host.telemetry.clear();
-    let replies = host.pump(Duration::from_millis(200));
+    let replies = host.pump(Duration::from_millis(150));
     assert!(replies.is_empty(), "{replies:?}");
     let (_, t) = *host.telemetry.last().expect("telemetry keeps coming");
     assert_eq!(t.chambers, chambers);
     assert_eq!(t.state, ArmState::Armed);
 
-    // Host silence: tripped within the deadline, pumps off, valves sealed.
-    host.send(HostMsg::Heartbeat);
+    // Host silence: tripped at the deadline, pumps off, valves sealed. The
+    // firmware handled the last heartbeat between the telemetry reports
+    // just before and just after its ack, so in firmware time the trip
+    // lies in [before + deadline, after + deadline + 2 ms].
+    host.telemetry.clear();
+    host.pump(Duration::from_millis(30));
+    let (_, before) = *host
+        .telemetry
+        .last()
+        .expect("telemetry before the heartbeat");
+    host.ack(HostMsg::Heartbeat);
     let silent_from = Instant::now();
     host.faults.clear();
     host.telemetry.clear();
-    host.pump(Duration::from_millis(SILENCE_MS + 500));
+    let until = silent_from + Duration::from_secs(3);
+    while host.faults.is_empty() && Instant::now() < until {
+        host.pump(Duration::from_millis(20));
+    }
     let (fault_at, fault) = *host
         .faults
         .first()
-        .expect("a fault event after host silence");
+        .expect("a fault event within 3 s of host silence");
     assert_eq!(fault.fault, Fault::HostSilence);
-    let after_ms = (fault_at - silent_from).as_millis() as u64;
+    let (_, after) = *host
+        .telemetry
+        .first()
+        .expect("telemetry after the heartbeat");
+    let deadline = SILENCE_MS;
     assert!(
-        (SILENCE_MS - 50..=SILENCE_MS + 150).contains(&after_ms),
-        "host-silence trip {after_ms} ms after the last frame (deadline {SILENCE_MS} ms)"
+        (before.time_ms + deadline..=after.time_ms + deadline + 2).contains(&fault.time_ms),
+        "trip at firmware time {} ms; heartbeat handled between {} and {} ms; deadline {deadline} ms",
+        fault.time_ms,
+        before.time_ms,
+        after.time_ms
     );
+    eprintln!(
+        "qemu_firmware: host-silence trip {} ms (wall clock) after the last heartbeat",
+        (fault_at - silent_from).as_millis()
+    );
+    host.pump(Duration::from_millis(50));
     let (_, t) = *host.telemetry.last().expect("telemetry after the trip");
     assert_eq!(t.state, ArmState::Tripped);
     assert!(t.faults.contains(Fault::HostSilence));
