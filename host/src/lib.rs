@@ -18,9 +18,12 @@ pub mod contact;
 pub mod density;
 pub mod displacement;
 pub mod frame;
+pub mod grasp;
+pub mod link;
 pub mod markers;
 pub mod params;
 pub mod pipeline;
+pub mod sim;
 pub mod synth;
 pub mod tracking;
 

@@ -1,0 +1,304 @@
+//! A simulated MCU: the firmware's control core behind a pseudo-terminal.
+//!
+//! [`SimMcu::spawn`] opens a pty pair and runs, on its own thread, the very
+//! [`Controller`] the STM32F103 runs, ticked at the firmware's 1 kHz on a
+//! simulated clock, with the firmware's [`TankModel`] in place of the
+//! pressure sensors. The host opens [`SimMcu::port_path`] like any serial
+//! port. The clock runs `speed` times faster than the wall clock, so tests
+//! and `dexitac sim --speed X` can run accelerated.
+//!
+//! [`SimMcu::reset`] restarts the controller (as a board reset would), and
+//! [`SimMcu::snapshot`] shows the outputs the controller drives.
+
+use std::io::{self, Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use dexitac_firmware::tank_model::{TankModel, TankModelParams};
+use dexitac_firmware::{
+    Clock, Config, Controller, FrameSink, PressureSource, PumpOutputs, Pumps, QueueFull,
+    TankReadings, Valves,
+};
+use dexitac_protocol::{ArmState, Chambers, FaultFlags, ResetCause, ValveState, CHAMBER_COUNT};
+use serialport::{SerialPort, TTYPort};
+
+/// Most control ticks run in one catch-up step (bounds the work after a stall).
+const MAX_CATCH_UP_TICKS: u64 = 1_000;
+
+/// Settings of the simulated MCU.
+#[derive(Debug, Clone)]
+pub struct SimMcuConfig {
+    /// The firmware configuration (silence deadline, hysteresis, ...).
+    pub firmware: Config,
+    /// The pneumatic model.
+    pub tanks: TankModelParams,
+    /// Simulated time per wall-clock time (1 = real time).
+    pub speed: f64,
+}
+
+impl Default for SimMcuConfig {
+    fn default() -> Self {
+        SimMcuConfig {
+            firmware: Config::default(),
+            tanks: TankModelParams::default(),
+            speed: 1.0,
+        }
+    }
+}
+
+/// What the simulated MCU drives, as the rig's sensors would see it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct McuSnapshot {
+    /// Simulated time since the (last) reset, ms.
+    pub time_ms: u64,
+    /// Valve state per chamber.
+    pub chambers: Chambers,
+    /// Pump outputs.
+    pub pumps: PumpOutputs,
+    /// Tank pressures, Pa.
+    pub tanks_pa: (i32, i32),
+    /// Chamber pressures, Pa.
+    pub chambers_pa: [i32; CHAMBER_COUNT],
+    /// Safety state.
+    pub state: ArmState,
+    /// Faults since the last disarm.
+    pub faults: FaultFlags,
+    /// Frames the controller accepted.
+    pub frames_ok: u32,
+    /// Byte runs the controller rejected.
+    pub frame_errors: u32,
+}
+
+/// The hardware the controller sees: clock, tank model, output latches.
+struct SimHw {
+    now_ms: u64,
+    model: TankModel,
+    chambers: Chambers,
+    pumps: PumpOutputs,
+}
+
+impl Clock for SimHw {
+    fn now_ms(&self) -> u32 {
+        // The firmware's millisecond counter wraps like the board's.
+        self.now_ms as u32
+    }
+}
+
+impl PressureSource for SimHw {
+    fn read_tanks(&mut self) -> TankReadings {
+        let (positive_pa, negative_pa) = self.model.tanks_pa();
+        TankReadings {
+            positive_pa: Ok(positive_pa),
+            negative_pa: Ok(negative_pa),
+        }
+    }
+}
+
+impl Valves for SimHw {
+    fn set_chambers(&mut self, chambers: &Chambers) {
+        self.chambers = *chambers;
+    }
+}
+
+impl Pumps for SimHw {
+    fn set_pumps(&mut self, pumps: PumpOutputs) {
+        self.pumps = pumps;
+    }
+}
+
+/// Bytes the controller sends, gathered for one write to the pty.
+#[derive(Default)]
+struct TxBuffer(Vec<u8>);
+
+impl FrameSink for TxBuffer {
+    fn send(&mut self, frame: &[u8]) -> Result<(), QueueFull> {
+        self.0.extend_from_slice(frame);
+        Ok(())
+    }
+}
+
+struct Shared {
+    snapshot: McuSnapshot,
+    reset_requested: bool,
+}
+
+/// A running simulated MCU; stops when dropped.
+pub struct SimMcu {
+    port_path: PathBuf,
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<io::Result<()>>>,
+}
+
+fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
+    // A panic on the MCU thread leaves the data consistent (plain values).
+    shared
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+impl SimMcu {
+    /// Opens a pty pair and starts the MCU thread on its master end.
+    pub fn spawn(config: SimMcuConfig) -> io::Result<SimMcu> {
+        let (mut master, slave) = TTYPort::pair().map_err(io::Error::from)?;
+        master
+            .set_timeout(Duration::from_millis(1))
+            .map_err(io::Error::from)?;
+        let port_path = slave
+            .name()
+            .map(PathBuf::from)
+            .ok_or_else(|| io::Error::other("pty without a name"))?;
+        let hw = new_hw(&config);
+        let shared = Arc::new(Mutex::new(Shared {
+            snapshot: snapshot(&hw, &new_controller(&config)),
+            reset_requested: false,
+        }));
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (shared, stop) = (Arc::clone(&shared), Arc::clone(&stop));
+            std::thread::Builder::new()
+                .name("sim-mcu".into())
+                // The slave end stays open in the thread so the pty does not
+                // hang up while the host closes and reopens its port.
+                .spawn(move || run(master, slave, config, &shared, &stop))?
+        };
+        Ok(SimMcu {
+            port_path,
+            shared,
+            stop,
+            thread: Some(thread),
+        })
+    }
+
+    /// The serial port path the host opens.
+    pub fn port_path(&self) -> &Path {
+        &self.port_path
+    }
+
+    /// The latest outputs and state.
+    pub fn snapshot(&self) -> McuSnapshot {
+        lock(&self.shared).snapshot
+    }
+
+    /// Restarts the controller as a board reset would (outputs to the safe
+    /// state, disarmed, clock from zero).
+    pub fn reset(&self) {
+        lock(&self.shared).reset_requested = true;
+    }
+
+    /// Stops the thread and reports how it ended.
+    pub fn stop(mut self) -> io::Result<()> {
+        self.halt()
+    }
+
+    fn halt(&mut self) -> io::Result<()> {
+        self.stop.store(true, Ordering::Relaxed);
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(result)) => result,
+            Some(Err(_)) => Err(io::Error::other("simulated MCU thread panicked")),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for SimMcu {
+    fn drop(&mut self) {
+        // Errors were the thread's own; nothing more to do while dropping.
+        if self.halt().is_err() {
+            eprintln!("simulated MCU stopped with an error");
+        }
+    }
+}
+
+fn new_hw(config: &SimMcuConfig) -> SimHw {
+    SimHw {
+        now_ms: 0,
+        model: TankModel::new(config.tanks),
+        chambers: [ValveState::Hold; CHAMBER_COUNT],
+        pumps: PumpOutputs::default(),
+    }
+}
+
+fn new_controller(config: &SimMcuConfig) -> Controller {
+    Controller::new(config.firmware, ResetCause::PowerOn)
+}
+
+fn snapshot(hw: &SimHw, controller: &Controller) -> McuSnapshot {
+    let mut chambers_pa = [0; CHAMBER_COUNT];
+    for (i, p) in chambers_pa.iter_mut().enumerate() {
+        *p = hw.model.chamber_pa(i).unwrap_or(0);
+    }
+    let link = controller.link_stats();
+    McuSnapshot {
+        time_ms: hw.now_ms,
+        chambers: hw.chambers,
+        pumps: hw.pumps,
+        tanks_pa: hw.model.tanks_pa(),
+        chambers_pa,
+        state: controller.state(),
+        faults: controller.faults(),
+        frames_ok: link.frames_ok,
+        frame_errors: link.frame_errors,
+    }
+}
+
+/// The MCU thread: read bytes, run the 1 kHz ticks due on the simulated
+/// clock, write the replies.
+fn run(
+    mut port: TTYPort,
+    _slave: TTYPort,
+    config: SimMcuConfig,
+    shared: &Mutex<Shared>,
+    stop: &AtomicBool,
+) -> io::Result<()> {
+    let speed = if config.speed.is_finite() && config.speed > 0.0 {
+        config.speed
+    } else {
+        1.0
+    };
+    let tick_ms = u64::from(config.firmware.tick_period_ms.max(1));
+    let mut hw = new_hw(&config);
+    let mut controller = new_controller(&config);
+    let mut epoch = Instant::now();
+    let mut tx = TxBuffer::default();
+    let mut buf = [0u8; 256];
+    while !stop.load(Ordering::Relaxed) {
+        if std::mem::take(&mut lock(shared).reset_requested) {
+            hw = new_hw(&config);
+            controller = Controller::new(config.firmware, ResetCause::Software);
+            epoch = Instant::now();
+        }
+        let n = match port.read(&mut buf) {
+            Ok(n) => n,
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    io::ErrorKind::TimedOut
+                        | io::ErrorKind::WouldBlock
+                        | io::ErrorKind::Interrupted
+                ) =>
+            {
+                0
+            }
+            Err(e) => return Err(e),
+        };
+        controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
+        let due_ms = (epoch.elapsed().as_secs_f64() * 1e3 * speed) as u64;
+        let mut ticks = 0;
+        while hw.now_ms + tick_ms <= due_ms && ticks < MAX_CATCH_UP_TICKS {
+            hw.now_ms += tick_ms;
+            hw.model.advance(tick_ms as u32, hw.pumps, &hw.chambers);
+            controller.tick(&mut hw, &mut tx);
+            ticks += 1;
+        }
+        if !tx.0.is_empty() {
+            port.write_all(&tx.0)?;
+            tx.0.clear();
+        }
+        lock(shared).snapshot = snapshot(&hw, &controller);
+    }
+    Ok(())
+}
