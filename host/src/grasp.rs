@@ -368,6 +368,17 @@ impl Grasp {
     }
 
     fn decide(&mut self, t_ms: u64, command: Command, cause: Cause) -> Decision {
+        if command == Command::ReopenInflation {
+            // Stable again means stable for a whole span after the
+            // disturbance: a small anchored creep can leave the old window
+            // inside T1, which would reseal at once.
+            for s in &mut self.sensors {
+                s.window.retain(|&(t, _)| t >= t_ms);
+                if s.contact_since_ms.is_some() {
+                    s.contact_since_ms = Some(t_ms);
+                }
+            }
+        }
         self.phase = match command {
             Command::Seal => Phase::Holding,
             Command::ReopenInflation => Phase::Reinforcing,
@@ -461,6 +472,27 @@ mod tests {
         ));
         assert_eq!(decisions[1].command, Command::Seal);
         assert_eq!(grasp.phase(), Phase::Holding);
+    }
+
+    #[test]
+    fn reinforcing_needs_a_fresh_stable_span_before_resealing() {
+        let (mut grasp, t0) = sealed_grasp();
+        // A slow creep of 0.6 mm over 4 s: the anchored shift passes T1 while
+        // the last 3 s span only 0.45 mm (inside T1).
+        let decisions = run(&mut grasp, t0, t0 + 9_000, |t| {
+            Some(((t.saturating_sub(t0) as f64 / 4_000.0).min(1.0) * 0.6, 0.0))
+        });
+        assert_eq!(
+            decisions[0].command,
+            Command::ReopenInflation,
+            "{decisions:?}"
+        );
+        let reseal = decisions.get(1).expect("resealed");
+        assert_eq!(reseal.command, Command::Seal);
+        assert!(
+            reseal.t_ms >= decisions[0].t_ms + grasp.params().stable_span_ms,
+            "{decisions:?}"
+        );
     }
 
     #[test]

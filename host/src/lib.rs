@@ -23,6 +23,7 @@ pub mod link;
 pub mod markers;
 pub mod params;
 pub mod pipeline;
+pub mod runtime;
 pub mod sim;
 pub mod synth;
 pub mod tracking;

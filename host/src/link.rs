@@ -49,6 +49,20 @@ pub struct LinkConfig {
     pub read_timeout_ms: u64,
 }
 
+impl LinkConfig {
+    /// These settings for a peer whose clock runs `speed` times faster than
+    /// the wall clock (the simulated MCU): the heartbeat period shrinks so
+    /// that it stays inside the firmware's host-silence deadline in its
+    /// time. Ack timeouts stay: the peer answers within a tick either way.
+    pub fn scaled(mut self, speed: f64) -> Self {
+        if speed.is_finite() && speed > 1.0 {
+            self.heartbeat_ms = ((self.heartbeat_ms as f64 / speed) as u64).max(2);
+            self.read_timeout_ms = self.read_timeout_ms.min(self.heartbeat_ms / 2).max(1);
+        }
+        self
+    }
+}
+
 impl Default for LinkConfig {
     fn default() -> Self {
         LinkConfig {
@@ -160,6 +174,7 @@ pub struct Link<P> {
     decoder: Decoder<McuMsg>,
     next_seq: u16,
     last_tx: Option<Instant>,
+    last_command_written: Option<Instant>,
     last_mcu_time_ms: Option<u32>,
     last_rx: Instant,
     events: VecDeque<McuEvent>,
@@ -234,6 +249,7 @@ impl<P: Port> Link<P> {
             decoder: Decoder::new(),
             next_seq: 0,
             last_tx: None,
+            last_command_written: None,
             last_mcu_time_ms: None,
             last_rx: Instant::now(),
             events: VecDeque::new(),
@@ -250,6 +266,12 @@ impl<P: Port> Link<P> {
     /// Traffic counters.
     pub fn stats(&self) -> LinkStats {
         self.stats
+    }
+
+    /// When the bytes of the last request's first attempt were written
+    /// (after the port's flush).
+    pub fn last_command_written(&self) -> Option<Instant> {
+        self.last_command_written
     }
 
     /// Time since the last valid frame from the MCU (or since the link was
@@ -356,6 +378,9 @@ impl<P: Port> Link<P> {
                 self.stats.retries += 1;
             }
             self.write_frame(seq, msg)?;
+            if attempt == 0 {
+                self.last_command_written = self.last_tx;
+            }
             let until = Instant::now() + Duration::from_millis(self.config.ack_timeout_ms);
             while Instant::now() < until {
                 if let Some(reply) = self.read_some(answers)? {

@@ -9,13 +9,19 @@
 //!
 //! [`SimMcu::reset`] restarts the controller (as a board reset would), and
 //! [`SimMcu::snapshot`] shows the outputs the controller drives.
+//!
+//! [`SimMcu::spawn_with_plant`] also steps a [`Plant`] (actuators, fingers,
+//! object) once per control tick with the tank pressures and the valve
+//! outputs, on the same simulated clock as the host's loop
+//! ([`SimMcuConfig::clock`]). The plant's time keeps running across an MCU
+//! reset; the firmware's own clock restarts from zero.
 
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use dexitac_firmware::tank_model::{TankModel, TankModelParams};
 use dexitac_firmware::{
@@ -24,6 +30,12 @@ use dexitac_firmware::{
 };
 use dexitac_protocol::{ArmState, Chambers, FaultFlags, ResetCause, ValveState, CHAMBER_COUNT};
 use serialport::{SerialPort, TTYPort};
+
+use crate::runtime::Clock as SimClock;
+use crate::sim::plant::Plant;
+
+/// A plant shared between the MCU thread (which steps it) and its readers.
+pub type SharedPlant = Arc<Mutex<Plant>>;
 
 /// Most control ticks run in one catch-up step (bounds the work after a stall).
 const MAX_CATCH_UP_TICKS: u64 = 1_000;
@@ -35,8 +47,12 @@ pub struct SimMcuConfig {
     pub firmware: Config,
     /// The pneumatic model.
     pub tanks: TankModelParams,
-    /// Simulated time per wall-clock time (1 = real time).
+    /// Simulated time per wall-clock time (1 = real time); used when no
+    /// clock is given.
     pub speed: f64,
+    /// The simulated clock shared with the host's loop (None: a new clock
+    /// at `speed`, started by the spawn).
+    pub clock: Option<SimClock>,
 }
 
 impl Default for SimMcuConfig {
@@ -45,6 +61,7 @@ impl Default for SimMcuConfig {
             firmware: Config::default(),
             tanks: TankModelParams::default(),
             speed: 1.0,
+            clock: None,
         }
     }
 }
@@ -143,6 +160,15 @@ fn lock(shared: &Mutex<Shared>) -> MutexGuard<'_, Shared> {
 impl SimMcu {
     /// Opens a pty pair and starts the MCU thread on its master end.
     pub fn spawn(config: SimMcuConfig) -> io::Result<SimMcu> {
+        SimMcu::spawn_inner(config, None)
+    }
+
+    /// Like [`SimMcu::spawn`], and steps `plant` once per control tick.
+    pub fn spawn_with_plant(config: SimMcuConfig, plant: SharedPlant) -> io::Result<SimMcu> {
+        SimMcu::spawn_inner(config, Some(plant))
+    }
+
+    fn spawn_inner(config: SimMcuConfig, plant: Option<SharedPlant>) -> io::Result<SimMcu> {
         let (mut master, slave) = TTYPort::pair().map_err(io::Error::from)?;
         master
             .set_timeout(Duration::from_millis(1))
@@ -163,7 +189,7 @@ impl SimMcu {
                 .name("sim-mcu".into())
                 // The slave end stays open in the thread so the pty does not
                 // hang up while the host closes and reopens its port.
-                .spawn(move || run(master, slave, config, &shared, &stop))?
+                .spawn(move || run(master, slave, config, plant, &shared, &stop))?
         };
         Ok(SimMcu {
             port_path,
@@ -213,6 +239,13 @@ impl Drop for SimMcu {
     }
 }
 
+/// Locks the plant (a panic while stepping leaves plain values behind).
+pub fn lock_plant(plant: &Mutex<Plant>) -> MutexGuard<'_, Plant> {
+    plant
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
 fn new_hw(config: &SimMcuConfig) -> SimHw {
     SimHw {
         now_ms: 0,
@@ -251,25 +284,24 @@ fn run(
     mut port: TTYPort,
     _slave: TTYPort,
     config: SimMcuConfig,
+    plant: Option<SharedPlant>,
     shared: &Mutex<Shared>,
     stop: &AtomicBool,
 ) -> io::Result<()> {
-    let speed = if config.speed.is_finite() && config.speed > 0.0 {
-        config.speed
-    } else {
-        1.0
-    };
+    let clock = config
+        .clock
+        .unwrap_or_else(|| SimClock::scaled(config.speed));
     let tick_ms = u64::from(config.firmware.tick_period_ms.max(1));
     let mut hw = new_hw(&config);
     let mut controller = new_controller(&config);
-    let mut epoch = Instant::now();
+    // Simulated time of the last tick; the firmware's clock is `hw.now_ms`.
+    let mut world_ms = clock.now_ms();
     let mut tx = TxBuffer::default();
     let mut buf = [0u8; 256];
     while !stop.load(Ordering::Relaxed) {
         if std::mem::take(&mut lock(shared).reset_requested) {
             hw = new_hw(&config);
             controller = Controller::new(config.firmware, ResetCause::Software);
-            epoch = Instant::now();
         }
         let n = match port.read(&mut buf) {
             Ok(n) => n,
@@ -286,14 +318,25 @@ fn run(
             Err(e) => return Err(e),
         };
         controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
-        let due_ms = (epoch.elapsed().as_secs_f64() * 1e3 * speed) as u64;
+        let due_ms = clock.now_ms();
         let mut ticks = 0;
-        while hw.now_ms + tick_ms <= due_ms && ticks < MAX_CATCH_UP_TICKS {
+        let mut plant = plant.as_ref().map(|p| lock_plant(p));
+        while world_ms + tick_ms <= due_ms && ticks < MAX_CATCH_UP_TICKS {
+            world_ms += tick_ms;
             hw.now_ms += tick_ms;
             hw.model.advance(tick_ms as u32, hw.pumps, &hw.chambers);
             controller.tick(&mut hw, &mut tx);
+            if let Some(plant) = plant.as_mut() {
+                plant.step(world_ms, tick_ms as u32, hw.model.tanks_pa(), &hw.chambers);
+            }
             ticks += 1;
         }
+        if ticks == MAX_CATCH_UP_TICKS {
+            // Stalled for longer than the catch-up bound: skip the lost time
+            // rather than running the physics in a burst.
+            world_ms = due_ms;
+        }
+        drop(plant);
         if !tx.0.is_empty() {
             port.write_all(&tx.0)?;
             tx.0.clear();

@@ -1,7 +1,16 @@
 //! The simulated rig: everything the real gripper does, on the PC.
 //!
-//! [`mcu`] runs the firmware's own control core ([`dexitac_firmware::Controller`])
-//! behind a pseudo-terminal, so the host reaches it through its normal
-//! serial code path ([`crate::link`]).
+//! - [`mcu`] runs the firmware's own control core
+//!   ([`dexitac_firmware::Controller`]) behind a pseudo-terminal, so the host
+//!   reaches it through its normal serial code path ([`crate::link`]), and
+//!   steps the [`plant`] (actuators, fingers, object, pokes) on every tick.
+//! - [`render`] draws each fingertip's marker frame from the plant's contact.
+//! - [`scenario`] loads the scenarios (TOML, with embedded presets).
+//! - [`rig`] wires them to the host's task loop ([`crate::runtime`]) and
+//!   records what happened ([`rig::SimReport`]).
 
 pub mod mcu;
+pub mod plant;
+pub mod render;
+pub mod rig;
+pub mod scenario;

@@ -1,0 +1,657 @@
+//! The host's task loop (paper Fig. 4, Algorithm 1 processes 1-3): one
+//! thread per tactile sensor (frame source -> pipeline -> observation), one
+//! link thread (grasp state machine, commands and acks, heartbeat,
+//! telemetry), channels between them.
+//!
+//! ```text
+//! sensor 0: FrameSource -> Pipeline -> Observation --\
+//!                                                      mpsc -> link thread: Grasp -> Link -> MCU
+//! sensor 1: FrameSource -> Pipeline -> Observation --/              |
+//!                                                        RuntimeEvent (log, recorder, status line)
+//! ```
+//!
+//! # Commands (two-finger grasp)
+//!
+//! The *grasping chambers* ([`ControlConfig::grasp_chambers`], default
+//! [`DEFAULT_GRASP_CHAMBERS`]) are the chambers whose inflation closes the
+//! fingers: for each finger its Rot joint (chambers 0 and 4) and the Dex
+//! bellows on the palm side (chambers 1 and 5). The other Dex bellows (2, 3,
+//! 6, 7) bend the finger sideways or extend it, which a two-finger grasp does
+//! not use; they stay sealed.
+//!
+//! | event | command |
+//! | --- | --- |
+//! | start | `Disarm` (clears a latched trip), `Arm`, tank targets, both pumps `Regulate`, telemetry on |
+//! | tanks charged | `SetChambers`: grasping chambers `Inflate`, others `Hold` (fingers close) |
+//! | [`Command::Seal`] (stable) | `SealAll` |
+//! | [`Command::ReopenInflation`] (disturbance) | `SetChambers`: grasping chambers `Inflate` |
+//! | [`Command::Release`] (slip, no contact, contact lost) | `SetChambers`: grasping chambers `Deflate` (fingers open) |
+//! | stop (end, Ctrl-C, any error) | `SealAll`, then `Disarm` |
+//!
+//! With tactile feedback off ([`ControlConfig::tactile_feedback`], the
+//! paper's ablation) the frames are still processed and reported, but the
+//! grasp runs open loop: inflate for [`ControlConfig::open_loop_close_ms`]
+//! (default: the paper's ClosureGrip time to stable, Table III), then seal,
+//! and nothing after that.
+//!
+//! # Stopping
+//!
+//! The loop ends when the stop flag is set (Ctrl-C, end of a scenario), when
+//! every frame source has ended, or on an error (link failure, MCU fault or
+//! reset, a sensor thread failing). In every case it then seals the valves
+//! and disarms the MCU (pumps off, valves sealed); if the link itself is
+//! dead the firmware reaches the same safe state on its host-silence trip.
+//!
+//! # Clock
+//!
+//! Every time in the loop comes from an injected [`Clock`]: the wall clock
+//! on the rig, a clock running `speed` times faster in the simulator and
+//! tests. Only the link's own ack and heartbeat timeouts are wall-clock
+//! durations (scale them with [`LinkConfig::scaled`](crate::link::LinkConfig)).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use dexitac_protocol::{
+    Chambers, FaultEvent, HostMsg, PumpMode, TankTargets, Telemetry, ValveState, CHAMBER_COUNT,
+};
+
+use crate::frame::{FrameError, GreyFrame};
+use crate::grasp::{CentreMm, Command, Decision, Grasp, GraspParams, Observation, SENSOR_COUNT};
+use crate::link::{Link, LinkError, McuEvent, Port};
+use crate::pipeline::Pipeline;
+use crate::PointPx;
+
+/// Default grasping chambers: each finger's Rot joint and palm-side Dex bellows.
+pub const DEFAULT_GRASP_CHAMBERS: [usize; 4] = [0, 1, 4, 5];
+/// Open-loop closing time without tactile feedback, ms: the paper's average
+/// time to a stable ClosureGrip (Table III: 3.38 s and 3.40 s).
+pub const OPEN_LOOP_CLOSE_MS: u64 = 3_400;
+
+/// A clock in milliseconds since its creation, running `speed` times faster
+/// than the wall clock (1 on the rig).
+#[derive(Debug, Clone, Copy)]
+pub struct Clock {
+    epoch: Instant,
+    speed: f64,
+}
+
+impl Clock {
+    /// The wall clock.
+    pub fn wall() -> Self {
+        Clock::scaled(1.0)
+    }
+
+    /// A clock `speed` times faster than the wall clock (non-finite or
+    /// non-positive speeds mean 1).
+    pub fn scaled(speed: f64) -> Self {
+        Clock {
+            epoch: Instant::now(),
+            speed: if speed.is_finite() && speed > 0.0 {
+                speed
+            } else {
+                1.0
+            },
+        }
+    }
+
+    /// Clock time, ms.
+    pub fn now_ms(&self) -> u64 {
+        (self.epoch.elapsed().as_secs_f64() * 1e3 * self.speed) as u64
+    }
+
+    /// Simulated time per wall-clock time.
+    pub fn speed(&self) -> f64 {
+        self.speed
+    }
+
+    /// The wall-clock duration of `ms` of clock time.
+    pub fn wall_duration(&self, ms: u64) -> Duration {
+        Duration::from_secs_f64(ms as f64 / 1e3 / self.speed)
+    }
+
+    /// Sleeps until clock time `t_ms` (returns at once if it has passed).
+    pub fn sleep_until(&self, t_ms: u64) {
+        let now = self.now_ms();
+        if t_ms > now {
+            std::thread::sleep(self.wall_duration(t_ms - now));
+        }
+    }
+}
+
+/// A frame and when it was captured.
+#[derive(Debug, Clone)]
+pub struct TimedFrame {
+    /// Capture time on the loop's clock, ms.
+    pub t_ms: u64,
+    /// The working grey frame.
+    pub frame: GreyFrame,
+}
+
+/// Why a frame source failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// A file could not be read.
+    #[error("cannot read {path}: {source}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// An image could not be decoded.
+    #[error("cannot decode {path}: {reason}")]
+    Decode {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What the decoder said.
+        reason: String,
+    },
+    /// The frame does not fit the pipeline.
+    #[error("bad frame: {0}")]
+    Frame(#[from] FrameError),
+}
+
+/// Where a sensor's frames come from (simulated renderer, a directory of
+/// frames, later a camera).
+pub trait FrameSource: Send {
+    /// Blocks until the next frame; `None` when the source has ended.
+    fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError>;
+}
+
+/// One tactile sensor: its frames and its calibrated pipeline.
+pub struct Sensor {
+    /// The frame source.
+    pub source: Box<dyn FrameSource>,
+    /// The calibrated pipeline.
+    pub pipeline: Pipeline,
+}
+
+/// Settings of the task loop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlConfig {
+    /// Algorithm 1 thresholds.
+    pub grasp: GraspParams,
+    /// Chambers whose inflation closes the fingers.
+    pub grasp_chambers: Vec<usize>,
+    /// Tank targets (positive, negative), Pa.
+    pub tank_targets_pa: (i32, i32),
+    /// Start closing when the positive tank reaches this fraction of its target.
+    pub charge_fraction: f64,
+    /// Start closing at the latest this long after arming, ms.
+    pub charge_timeout_ms: u64,
+    /// Telemetry period asked of the MCU, ms.
+    pub telemetry_interval_ms: u16,
+    /// Close the loop on the tactile observations (false: the paper's ablation).
+    pub tactile_feedback: bool,
+    /// Without tactile feedback: seal this long after closing began, ms.
+    pub open_loop_close_ms: u64,
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        ControlConfig {
+            grasp: GraspParams::default(),
+            grasp_chambers: DEFAULT_GRASP_CHAMBERS.to_vec(),
+            tank_targets_pa: dexitac_firmware::control::DEFAULT_TARGETS_PA,
+            charge_fraction: 0.9,
+            charge_timeout_ms: 8_000,
+            telemetry_interval_ms: 20,
+            tactile_feedback: true,
+            open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
+        }
+    }
+}
+
+/// Why the task loop failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    /// The serial link failed.
+    #[error("link: {0}")]
+    Link(#[from] LinkError),
+    /// The MCU tripped its safety loop.
+    #[error("the MCU tripped: {:?} at {} ms (tanks {} / {} Pa)", .0.fault, .0.time_ms, .0.positive_tank_pa, .0.negative_tank_pa)]
+    McuFault(FaultEvent),
+    /// The MCU restarted during the run (it is disarmed, in its safe state).
+    #[error("the MCU reset during the run")]
+    McuReset,
+    /// A sensor thread failed.
+    #[error("sensor {sensor}: {reason}")]
+    Sensor {
+        /// The sensor.
+        sensor: usize,
+        /// What failed.
+        reason: String,
+    },
+    /// The configuration is not usable.
+    #[error("configuration: {0}")]
+    Config(String),
+}
+
+/// Why the loop stopped without an error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StopReason {
+    /// The stop flag was set (Ctrl-C, end of a scenario).
+    Requested,
+    /// Every frame source ended.
+    FramesEnded,
+}
+
+/// What the loop reports as it runs (times on its clock, ms).
+#[derive(Debug, Clone)]
+pub enum RuntimeEvent {
+    /// A sensor's pipeline result.
+    Observation {
+        /// The sensor.
+        sensor: usize,
+        /// Capture time.
+        t_ms: u64,
+        /// The contact centre, mm from the image centre.
+        centre_mm: Option<CentreMm>,
+        /// Detected markers (working px), for density snapshots.
+        markers: Arc<Vec<PointPx>>,
+        /// Pipeline time, ms (wall clock).
+        pipeline_ms: f64,
+    },
+    /// The grasp state machine decided.
+    Decision {
+        /// When the loop handled it.
+        t_ms: u64,
+        /// The decision (its `t_ms` is the frame's capture time).
+        decision: Decision,
+    },
+    /// A command was sent and acknowledged.
+    CommandSent {
+        /// When its bytes were written.
+        t_ms: u64,
+        /// The command.
+        msg: HostMsg,
+        /// Why it was sent.
+        reason: &'static str,
+        /// Wall time from the deciding frame's arrival to the bytes written.
+        from_frame: Option<Duration>,
+    },
+    /// A telemetry report.
+    Telemetry {
+        /// When it arrived.
+        t_ms: u64,
+        /// The report.
+        telemetry: Telemetry,
+    },
+    /// The loop ended (after the shutdown commands).
+    Stopped {
+        /// When.
+        t_ms: u64,
+        /// How: `Ok` or the error's text.
+        outcome: Result<StopReason, String>,
+    },
+}
+
+/// A sensor thread's message to the link thread.
+enum SensorMsg {
+    Report {
+        sensor: usize,
+        t_ms: u64,
+        arrived: Instant,
+        centre_mm: Option<CentreMm>,
+        markers: Arc<Vec<PointPx>>,
+        pipeline_ms: f64,
+    },
+    Failed {
+        sensor: usize,
+        reason: String,
+    },
+    Ended,
+}
+
+/// The pipeline's contact centre in mm from the image centre.
+pub fn centre_mm(pipeline: &Pipeline, centre_px: PointPx) -> CentreMm {
+    let cal = &pipeline.calibration;
+    let mm = pipeline.params.frame.mm_per_px;
+    CentreMm {
+        x_mm: (centre_px.x - (cal.width as f64 - 1.0) / 2.0) * mm,
+        y_mm: (centre_px.y - (cal.height as f64 - 1.0) / 2.0) * mm,
+    }
+}
+
+fn sensor_thread(
+    sensor: usize,
+    mut setup: Sensor,
+    clock: Clock,
+    stop: &AtomicBool,
+    tx: &Sender<SensorMsg>,
+) {
+    while !stop.load(Ordering::Relaxed) {
+        let frame = match setup.source.next_frame(&clock) {
+            Ok(Some(frame)) => frame,
+            Ok(None) => break,
+            Err(e) => {
+                // The receiver only disappears when the loop has ended.
+                let _ = tx.send(SensorMsg::Failed {
+                    sensor,
+                    reason: e.to_string(),
+                });
+                return;
+            }
+        };
+        let arrived = Instant::now();
+        let msg = match setup.pipeline.run(&frame.frame) {
+            Ok(result) => SensorMsg::Report {
+                sensor,
+                t_ms: frame.t_ms,
+                arrived,
+                centre_mm: result.contact.map(|c| centre_mm(&setup.pipeline, c.centre)),
+                markers: Arc::new(result.markers.positions()),
+                pipeline_ms: result.times.total_ms,
+            },
+            Err(e) => SensorMsg::Failed {
+                sensor,
+                reason: e.to_string(),
+            },
+        };
+        let failed = matches!(msg, SensorMsg::Failed { .. });
+        if tx.send(msg).is_err() || failed {
+            return;
+        }
+    }
+    let _ = tx.send(SensorMsg::Ended);
+}
+
+/// Where the loop is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    Charging { since_ms: u64 },
+    Closing { since_ms: u64 },
+    Sealed,
+}
+
+struct Control<'a, P> {
+    config: &'a ControlConfig,
+    link: &'a mut Link<P>,
+    clock: Clock,
+    events: &'a Sender<RuntimeEvent>,
+    grasp: Grasp,
+    stage: Stage,
+    positive_tank_pa: Option<i32>,
+}
+
+impl<P: Port> Control<'_, P> {
+    fn chambers(&self, state: ValveState) -> Chambers {
+        let mut c = [ValveState::Hold; CHAMBER_COUNT];
+        for &i in &self.config.grasp_chambers {
+            if let Some(slot) = c.get_mut(i) {
+                *slot = state;
+            }
+        }
+        c
+    }
+
+    fn send(
+        &mut self,
+        msg: HostMsg,
+        reason: &'static str,
+        arrived: Option<Instant>,
+    ) -> Result<(), LinkError> {
+        self.link.command(msg)?;
+        let written = self.link.last_command_written();
+        let from_frame = arrived
+            .zip(written)
+            .map(|(a, w)| w.saturating_duration_since(a));
+        let _ = self.events.send(RuntimeEvent::CommandSent {
+            t_ms: self.written_ms(written),
+            msg,
+            reason,
+            from_frame,
+        });
+        Ok(())
+    }
+
+    /// Clock time of a wall-clock instant in the recent past.
+    fn written_ms(&self, at: Option<Instant>) -> u64 {
+        let now = self.clock.now_ms();
+        let ago = at.map_or(0.0, |a| {
+            a.elapsed().as_secs_f64() * 1e3 * self.clock.speed()
+        });
+        now.saturating_sub(ago as u64)
+    }
+
+    fn setup(&mut self) -> Result<(), RuntimeError> {
+        self.link.hello()?;
+        self.link.command(HostMsg::Disarm)?;
+        self.link.command(HostMsg::Arm)?;
+        let (pos, neg) = self.config.tank_targets_pa;
+        let targets =
+            TankTargets::new(pos, neg).map_err(|e| RuntimeError::Config(e.to_string()))?;
+        self.send(HostMsg::SetTankTargets(targets), "setup", None)?;
+        self.send(
+            HostMsg::SetPumps {
+                positive: PumpMode::Regulate,
+                negative: PumpMode::Regulate,
+            },
+            "setup",
+            None,
+        )?;
+        self.link.command(HostMsg::SetTelemetryInterval {
+            interval_ms: self.config.telemetry_interval_ms,
+        })?;
+        self.stage = Stage::Charging {
+            since_ms: self.clock.now_ms(),
+        };
+        Ok(())
+    }
+
+    fn start_closing(&mut self) -> Result<(), LinkError> {
+        let now = self.clock.now_ms();
+        self.send(
+            HostMsg::SetChambers {
+                chambers: self.chambers(ValveState::Inflate),
+            },
+            "close fingers",
+            None,
+        )?;
+        self.grasp.start(now);
+        self.stage = Stage::Closing { since_ms: now };
+        Ok(())
+    }
+
+    /// Time-driven steps: charging done, open-loop seal, no-contact timeout.
+    fn on_time(&mut self) -> Result<(), LinkError> {
+        let now = self.clock.now_ms();
+        match self.stage {
+            Stage::Charging { since_ms } => {
+                let target = f64::from(self.config.tank_targets_pa.0);
+                let charged = self
+                    .positive_tank_pa
+                    .is_some_and(|p| f64::from(p) >= self.config.charge_fraction * target);
+                if charged || now.saturating_sub(since_ms) >= self.config.charge_timeout_ms {
+                    self.start_closing()?;
+                }
+            }
+            Stage::Closing { since_ms } if !self.config.tactile_feedback => {
+                if now.saturating_sub(since_ms) >= self.config.open_loop_close_ms {
+                    self.send(HostMsg::SealAll, "open-loop seal", None)?;
+                    self.stage = Stage::Sealed;
+                }
+            }
+            _ => {}
+        }
+        if self.config.tactile_feedback {
+            if let Some(d) = self.grasp.tick(now) {
+                self.act(d, None)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), LinkError> {
+        let _ = self.events.send(RuntimeEvent::Decision {
+            t_ms: self.clock.now_ms(),
+            decision,
+        });
+        let (msg, reason) = match decision.command {
+            Command::Seal => (HostMsg::SealAll, "stable: seal"),
+            Command::ReopenInflation => (
+                HostMsg::SetChambers {
+                    chambers: self.chambers(ValveState::Inflate),
+                },
+                "disturbance: reopen inflation",
+            ),
+            Command::Release => (
+                HostMsg::SetChambers {
+                    chambers: self.chambers(ValveState::Deflate),
+                },
+                "release",
+            ),
+        };
+        self.stage = Stage::Sealed;
+        self.send(msg, reason, arrived)
+    }
+
+    fn on_sensor(&mut self, msg: SensorMsg) -> Result<bool, RuntimeError> {
+        match msg {
+            SensorMsg::Report {
+                sensor,
+                t_ms,
+                arrived,
+                centre_mm,
+                markers,
+                pipeline_ms,
+            } => {
+                let _ = self.events.send(RuntimeEvent::Observation {
+                    sensor,
+                    t_ms,
+                    centre_mm,
+                    markers,
+                    pipeline_ms,
+                });
+                if self.config.tactile_feedback && !matches!(self.stage, Stage::Charging { .. }) {
+                    let obs = Observation { t_ms, centre_mm };
+                    if let Some(d) = self.grasp.observe(sensor, obs) {
+                        self.act(d, Some(arrived))?;
+                    }
+                }
+                Ok(true)
+            }
+            SensorMsg::Failed { sensor, reason } => Err(RuntimeError::Sensor { sensor, reason }),
+            SensorMsg::Ended => Ok(false),
+        }
+    }
+
+    fn on_mcu(&mut self) -> Result<(), RuntimeError> {
+        self.link.keep_alive()?;
+        for event in self.link.poll(Duration::ZERO)? {
+            match event {
+                McuEvent::Telemetry(telemetry) => {
+                    self.positive_tank_pa = Some(telemetry.positive_tank_pa);
+                    let _ = self.events.send(RuntimeEvent::Telemetry {
+                        t_ms: self.clock.now_ms(),
+                        telemetry,
+                    });
+                }
+                McuEvent::Fault(fault) => return Err(RuntimeError::McuFault(fault)),
+                McuEvent::McuReset => return Err(RuntimeError::McuReset),
+            }
+        }
+        Ok(())
+    }
+
+    fn run(
+        &mut self,
+        rx: &Receiver<SensorMsg>,
+        stop: &AtomicBool,
+    ) -> Result<StopReason, RuntimeError> {
+        self.setup()?;
+        let mut live = SENSOR_COUNT;
+        // Wake often enough to keep the heartbeat well inside its period.
+        let wait = Duration::from_millis((self.link.config().heartbeat_ms / 4).clamp(1, 10));
+        loop {
+            if stop.load(Ordering::Relaxed) {
+                return Ok(StopReason::Requested);
+            }
+            match rx.recv_timeout(wait) {
+                Ok(msg) => {
+                    if !self.on_sensor(msg)? {
+                        live = live.saturating_sub(1);
+                        if live == 0 {
+                            return Ok(StopReason::FramesEnded);
+                        }
+                    }
+                    // Drain what queued up while this frame was handled.
+                    while let Ok(msg) = rx.try_recv() {
+                        if !self.on_sensor(msg)? {
+                            live = live.saturating_sub(1);
+                        }
+                    }
+                    if live == 0 {
+                        return Ok(StopReason::FramesEnded);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return Ok(StopReason::FramesEnded),
+            }
+            self.on_time()?;
+            self.on_mcu()?;
+        }
+    }
+
+    /// Seal, then disarm; the first error is returned, both are tried.
+    fn shutdown(&mut self) -> Result<(), LinkError> {
+        let sealed = self.link.command(HostMsg::SealAll);
+        let disarmed = self.link.command(HostMsg::Disarm);
+        sealed.and(disarmed)
+    }
+}
+
+/// Runs the task loop until `stop` is set, the frames end, or an error.
+/// Always ends with the gripper sealed and the MCU disarmed (see the
+/// [module docs](self)). `sensors` must hold one entry per fingertip.
+pub fn run<P: Port>(
+    config: &ControlConfig,
+    link: &mut Link<P>,
+    sensors: Vec<Sensor>,
+    clock: Clock,
+    stop: &AtomicBool,
+    events: &Sender<RuntimeEvent>,
+) -> Result<StopReason, RuntimeError> {
+    if sensors.len() != SENSOR_COUNT {
+        return Err(RuntimeError::Config(format!(
+            "{} sensors given, the gripper has {SENSOR_COUNT}",
+            sensors.len()
+        )));
+    }
+    let sensor_stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel();
+    let mut control = Control {
+        config,
+        link,
+        clock,
+        events,
+        grasp: Grasp::new(config.grasp),
+        stage: Stage::Charging { since_ms: 0 },
+        positive_tank_pa: None,
+    };
+    let result = std::thread::scope(|scope| {
+        for (i, sensor) in sensors.into_iter().enumerate() {
+            let tx = tx.clone();
+            let sensor_stop = &sensor_stop;
+            scope.spawn(move || sensor_thread(i, sensor, clock, sensor_stop, &tx));
+        }
+        drop(tx);
+        let result = control.run(&rx, stop);
+        sensor_stop.store(true, Ordering::Relaxed);
+        result
+    });
+    let shutdown = control.shutdown();
+    let result = match (result, shutdown) {
+        (Err(e), _) => Err(e),
+        (Ok(_), Err(e)) => Err(e.into()),
+        (Ok(reason), Ok(())) => Ok(reason),
+    };
+    let _ = events.send(RuntimeEvent::Stopped {
+        t_ms: clock.now_ms(),
+        outcome: result.as_ref().map(|r| *r).map_err(|e| e.to_string()),
+    });
+    result
+}
