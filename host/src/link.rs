@@ -269,7 +269,7 @@ impl<P: Port> Link<P> {
     }
 
     /// When the bytes of the last request's first attempt were written
-    /// (after the port's flush).
+    /// (handed to the kernel's tty driver).
     pub fn last_command_written(&self) -> Option<Instant> {
         self.last_command_written
     }
@@ -397,8 +397,11 @@ impl<P: Port> Link<P> {
         bytes.push(0);
         bytes.extend_from_slice(&frame);
         let port = self.port.as_mut().ok_or(LinkError::Disconnected)?;
+        // No flush: on a tty it is tcdrain, which blocks until the far end
+        // has taken the bytes (on a pty: until the simulated MCU's thread
+        // runs), stalling the heartbeat. Serial ports and ptys do not buffer
+        // in user space, so the bytes are handed to the kernel here.
         port.write_all(&bytes)?;
-        port.flush()?;
         self.stats.frames_sent += 1;
         self.last_tx = Some(Instant::now());
         Ok(())

@@ -2,6 +2,8 @@
 
 mod analyze;
 mod bench_cmd;
+mod cli_run;
+mod cli_sim;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +31,11 @@ enum Command {
     /// Accuracy against run time on synthetic scenes, per setting and scene
     /// category (Markdown to stdout, plot and tables to --out-dir).
     BenchPipeline(BenchArgs),
+    /// The whole system on the simulated rig (firmware core behind a pty,
+    /// pneumatics, object, rendered fingertip cameras); results to --out.
+    Sim(cli_sim::SimArgs),
+    /// The task loop on the real gripper: serial port, gripper config, frame sources.
+    Run(cli_run::RunArgs),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -73,6 +80,8 @@ fn main() -> ExitCode {
     match cli.command {
         Some(Command::Analyze(args)) => analyze::run(&args),
         Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
+        Some(Command::Sim(args)) => cli_sim::run(&args),
+        Some(Command::Run(args)) => cli_run::run(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",

@@ -55,7 +55,8 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use dexitac_protocol::{
-    Chambers, FaultEvent, HostMsg, PumpMode, TankTargets, Telemetry, ValveState, CHAMBER_COUNT,
+    Chambers, FaultEvent, HostMsg, NackReason, PumpMode, TankTargets, Telemetry, ValveState,
+    CHAMBER_COUNT,
 };
 
 use crate::frame::{FrameError, GreyFrame};
@@ -316,6 +317,22 @@ pub fn centre_mm(pipeline: &Pipeline, centre_px: PointPx) -> CentreMm {
     }
 }
 
+/// Niceness of the sensor threads: image processing yields the CPU to the
+/// link thread, whose heartbeat and commands have deadlines (the firmware's
+/// host-silence trip), whatever else runs on the machine.
+const SENSOR_THREAD_NICE: i32 = 10;
+
+/// Lowers the calling thread's scheduling priority (Linux: per thread).
+/// Best effort: on failure the thread runs at the default priority.
+fn lower_thread_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority only reads its integer arguments; `who = 0` is
+    // the calling thread on Linux.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, SENSOR_THREAD_NICE);
+    }
+}
+
 fn sensor_thread(
     sensor: usize,
     mut setup: Sensor,
@@ -323,6 +340,7 @@ fn sensor_thread(
     stop: &AtomicBool,
     tx: &Sender<SensorMsg>,
 ) {
+    lower_thread_priority();
     while !stop.load(Ordering::Relaxed) {
         let frame = match setup.source.next_frame(&clock) {
             Ok(Some(frame)) => frame,
@@ -393,8 +411,10 @@ impl<P: Port> Control<'_, P> {
         msg: HostMsg,
         reason: &'static str,
         arrived: Option<Instant>,
-    ) -> Result<(), LinkError> {
-        self.link.command(msg)?;
+    ) -> Result<(), RuntimeError> {
+        if let Err(e) = self.link.command(msg) {
+            return Err(self.explain(e));
+        }
         let written = self.link.last_command_written();
         let from_frame = arrived
             .zip(written)
@@ -406,6 +426,27 @@ impl<P: Port> Control<'_, P> {
             from_frame,
         });
         Ok(())
+    }
+
+    /// A refusal because the MCU tripped is reported as the trip itself
+    /// (its fault event is usually still queued on the link).
+    fn explain(&mut self, e: LinkError) -> RuntimeError {
+        if matches!(
+            e,
+            LinkError::Nack {
+                reason: NackReason::Tripped,
+                ..
+            }
+        ) {
+            if let Ok(events) = self.link.poll(Duration::from_millis(5)) {
+                for event in events {
+                    if let McuEvent::Fault(f) = event {
+                        return RuntimeError::McuFault(f);
+                    }
+                }
+            }
+        }
+        e.into()
     }
 
     /// Clock time of a wall-clock instant in the recent past.
@@ -442,7 +483,7 @@ impl<P: Port> Control<'_, P> {
         Ok(())
     }
 
-    fn start_closing(&mut self) -> Result<(), LinkError> {
+    fn start_closing(&mut self) -> Result<(), RuntimeError> {
         let now = self.clock.now_ms();
         self.send(
             HostMsg::SetChambers {
@@ -457,7 +498,7 @@ impl<P: Port> Control<'_, P> {
     }
 
     /// Time-driven steps: charging done, open-loop seal, no-contact timeout.
-    fn on_time(&mut self) -> Result<(), LinkError> {
+    fn on_time(&mut self) -> Result<(), RuntimeError> {
         let now = self.clock.now_ms();
         match self.stage {
             Stage::Charging { since_ms } => {
@@ -485,7 +526,7 @@ impl<P: Port> Control<'_, P> {
         Ok(())
     }
 
-    fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), LinkError> {
+    fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), RuntimeError> {
         let _ = self.events.send(RuntimeEvent::Decision {
             t_ms: self.clock.now_ms(),
             decision,

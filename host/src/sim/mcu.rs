@@ -37,8 +37,10 @@ use crate::sim::plant::Plant;
 /// A plant shared between the MCU thread (which steps it) and its readers.
 pub type SharedPlant = Arc<Mutex<Plant>>;
 
-/// Most control ticks run in one catch-up step (bounds the work after a stall).
-const MAX_CATCH_UP_TICKS: u64 = 1_000;
+/// Most control ticks run between two port reads.
+const MAX_BATCH_TICKS: u64 = 20;
+/// Longest simulated time caught up after a stall, ms; beyond it time is skipped.
+const MAX_LAG_MS: u64 = 1_000;
 
 /// Settings of the simulated MCU.
 #[derive(Debug, Clone)]
@@ -318,10 +320,19 @@ fn run(
             Err(e) => return Err(e),
         };
         controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
-        let due_ms = clock.now_ms();
-        let mut ticks = 0;
+        let now_ms = clock.now_ms();
+        if now_ms > world_ms + MAX_LAG_MS {
+            // Stalled for longer than the lag bound: skip the lost time
+            // rather than running the physics in a burst.
+            let skipped = now_ms - world_ms - MAX_LAG_MS;
+            world_ms += skipped;
+            hw.now_ms += skipped;
+        }
+        // A bounded batch, then back to the port: bytes that arrived during
+        // a stall are read before the ticks they preceded run out.
+        let due_ms = now_ms.min(world_ms + MAX_BATCH_TICKS * tick_ms);
         let mut plant = plant.as_ref().map(|p| lock_plant(p));
-        while world_ms + tick_ms <= due_ms && ticks < MAX_CATCH_UP_TICKS {
+        while world_ms + tick_ms <= due_ms {
             world_ms += tick_ms;
             hw.now_ms += tick_ms;
             hw.model.advance(tick_ms as u32, hw.pumps, &hw.chambers);
@@ -329,12 +340,6 @@ fn run(
             if let Some(plant) = plant.as_mut() {
                 plant.step(world_ms, tick_ms as u32, hw.model.tanks_pa(), &hw.chambers);
             }
-            ticks += 1;
-        }
-        if ticks == MAX_CATCH_UP_TICKS {
-            // Stalled for longer than the catch-up bound: skip the lost time
-            // rather than running the physics in a burst.
-            world_ms = due_ms;
         }
         drop(plant);
         if !tx.0.is_empty() {

@@ -9,7 +9,9 @@
 //! - [`rig`] wires them to the host's task loop ([`crate::runtime`]) and
 //!   records what happened ([`rig::SimReport`]).
 
+pub mod line;
 pub mod mcu;
+pub mod output;
 pub mod plant;
 pub mod render;
 pub mod rig;

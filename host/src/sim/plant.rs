@@ -123,9 +123,9 @@ impl Default for ObjectParams {
             mass_kg: 0.1,
             gap_mm: 5.6,
             friction: 0.8,
-            shear_stiffness_n_per_mm: 2.0,
-            slip_rate_mm_per_s_per_n: 25.0,
-            drop_slide_mm: 10.0,
+            shear_stiffness_n_per_mm: 2.5,
+            slip_rate_mm_per_s_per_n: 15.0,
+            drop_slide_mm: 15.0,
             contact_mm: [[-1.5, -2.0], [2.0, -1.0]],
             contact_width_mm: 2.5,
         }

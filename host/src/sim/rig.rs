@@ -10,6 +10,12 @@
 //! after the object fell or was released, or when the caller's stop flag is
 //! set (Ctrl-C).
 //!
+//! Above real time (`speed > 1`) the firmware's host-silence deadline is
+//! scaled by the speed: the host keeps the 500 ms of *wall-clock* time it
+//! has on the rig ([`SimOptions::stall_tolerance_ms`]), so the scheduling
+//! jitter of a busy PC does not trip the simulated board any more than it
+//! would trip the real one. At `speed = 1` the firmware's default applies.
+//!
 //! # Outcome
 //!
 //! - `held`: the object was still in the grasp at the end;
@@ -26,13 +32,14 @@ use dexitac_protocol::{HostMsg, ValveState};
 
 use crate::calibrate::{self, Calibration, CalibrationError};
 use crate::grasp::{Cause, CentreMm, Command};
-use crate::link::{Link, LinkConfig, LinkError};
+use crate::link::{Link, LinkConfig, LinkError, Port};
 use crate::params::Params;
 use crate::pipeline::Pipeline;
 use crate::runtime::{
     self, Clock, ControlConfig, FrameSource, RuntimeEvent, Sensor, SourceError, StopReason,
     TimedFrame,
 };
+use crate::sim::line::NoisyPort;
 use crate::sim::mcu::{lock_plant, McuSnapshot, SharedPlant, SimMcu, SimMcuConfig};
 use crate::sim::plant::{ObjectState, Plant, Poke, WorldState, FINGER_COUNT};
 use crate::sim::render::Renderer;
@@ -63,6 +70,14 @@ pub struct SimOptions {
     pub seed: u64,
     /// Set to end the run early (Ctrl-C).
     pub stop: Arc<AtomicBool>,
+    /// Probability that a byte on the serial line is corrupted, each way.
+    pub line_error_rate: f64,
+    /// Wall-clock time the host may stall before the simulated board trips
+    /// on host silence (and the link's ack timeout, a quarter of it), ms.
+    /// The rig's value is the firmware's 500 ms; tests on a loaded machine
+    /// with unoptimised builds give the loop more, as the grasp logic, not
+    /// the scheduler, is what they check (the silence trip has its own test).
+    pub stall_tolerance_ms: u32,
 }
 
 impl Default for SimOptions {
@@ -73,6 +88,8 @@ impl Default for SimOptions {
             status: false,
             seed: 1,
             stop: Arc::new(AtomicBool::new(false)),
+            line_error_rate: 0.0,
+            stall_tolerance_ms: dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS,
         }
     }
 }
@@ -322,15 +339,36 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     }
     // Calibration done: the simulated time starts now.
     let clock = Clock::scaled(options.speed);
+    let mut firmware = dexitac_firmware::Config::default();
+    // The host gets the same wall-clock time to send a frame as on the rig.
+    firmware.host_silence_ms =
+        (f64::from(options.stall_tolerance_ms) * clock.speed().max(1.0)) as u32;
     let mcu = SimMcu::spawn_with_plant(
         SimMcuConfig {
+            firmware,
             clock: Some(clock),
             speed: clock.speed(),
             ..SimMcuConfig::default()
         },
         Arc::clone(&plant),
     )?;
-    let mut link = Link::open(mcu.port_path(), LinkConfig::default().scaled(clock.speed()))?;
+    let link_config = LinkConfig {
+        ack_timeout_ms: u64::from(options.stall_tolerance_ms / 4).max(20),
+        ..LinkConfig::default().scaled(clock.speed())
+    };
+    let port = serialport::new(mcu.port_path().to_string_lossy(), link_config.baud)
+        .timeout(Duration::from_millis(link_config.read_timeout_ms.max(1)))
+        .open()
+        .map_err(|source| LinkError::Open {
+            path: mcu.port_path().to_path_buf(),
+            source,
+        })?;
+    let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
+        Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
+    } else {
+        Box::new(port)
+    };
+    let mut link = Link::new(port, link_config);
     let duration_ms = (scenario.duration_s * 1e3) as u64;
     let (tx, rx) = mpsc::channel();
     let live = Mutex::new(Live::default());

@@ -1,0 +1,129 @@
+//! `dexitac sim`: the whole system on the simulated rig (see
+//! `dexitac::sim::rig`), results to a directory (see `dexitac::sim::output`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use dexitac::sim::output;
+use dexitac::sim::rig::{run_scenario, SimOptions};
+use dexitac::sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
+
+/// Arguments of `dexitac sim`.
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {
+    /// A preset (disturbance, grasp-hold, slip, no-object) or a scenario TOML file.
+    #[arg(long, default_value = DEFAULT_SCENARIO, value_name = "NAME|FILE")]
+    scenario: String,
+    /// Run without tactile feedback (the paper's ablation: open-loop seal).
+    #[arg(long)]
+    no_tactile: bool,
+    /// Directory for events.log, timeseries.csv, plot.png, heatmaps, summary.json.
+    #[arg(long, default_value = "sim-out", value_name = "DIR")]
+    out: PathBuf,
+    /// Simulated time per wall-clock time (0.1..=20).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed)]
+    speed: f64,
+    /// Seed of the simulated cameras' noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// List the preset scenarios and exit.
+    #[arg(long)]
+    list: bool,
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (0.1..=20.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("speed must lie in 0.1..=20".into())
+    }
+}
+
+/// Installs a Ctrl-C handler that sets `stop` (once per process).
+pub fn stop_on_ctrl_c(stop: &Arc<AtomicBool>) {
+    let flag = Arc::clone(stop);
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)) {
+        eprintln!("dexitac: Ctrl-C handler not installed ({e}); stop with the scenario's end");
+    }
+}
+
+/// Runs the subcommand.
+pub fn run(args: &SimArgs) -> ExitCode {
+    if args.list {
+        for (name, text) in PRESETS {
+            let description = Scenario::from_toml_str(text, name)
+                .map(|s| s.description)
+                .unwrap_or_default();
+            println!("{name:<12} {description}");
+        }
+        return ExitCode::SUCCESS;
+    }
+    let scenario = match Scenario::load(&args.scenario) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    stop_on_ctrl_c(&stop);
+    eprintln!(
+        "dexitac sim: scenario {} ({:.0} s simulated at {}x), tactile feedback {}",
+        scenario.name,
+        scenario.duration_s,
+        args.speed,
+        if args.no_tactile { "off" } else { "on" }
+    );
+    let options = SimOptions {
+        tactile_feedback: !args.no_tactile,
+        speed: args.speed,
+        status: true,
+        seed: args.seed,
+        stop,
+        ..SimOptions::default()
+    };
+    let report = match run_scenario(&scenario, &options) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = output::write_all(&report, &args.out) {
+        eprintln!("dexitac sim: writing {}: {e}", args.out.display());
+        return ExitCode::from(2);
+    }
+    println!(
+        "scenario {}: outcome {}, time to stable {}, {} poke(s), wrote {}",
+        report.scenario,
+        report.outcome.name(),
+        report
+            .time_to_stable_s
+            .map_or("-".to_string(), |t| format!("{t:.2} s")),
+        report.disturbances.len(),
+        args.out.display()
+    );
+    for d in &report.disturbances {
+        println!(
+            "  poke {:?} at {:.2} s: detected {}, valves open {}",
+            d.poke.target,
+            d.t_onset_s,
+            d.t_detected_s.map_or("never".to_string(), |t| format!(
+                "+{:.3} s",
+                t - d.t_onset_s
+            )),
+            d.response_s()
+                .map_or("never".to_string(), |t| format!("+{t:.3} s")),
+        );
+    }
+    match &report.loop_result {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dexitac sim: the task loop failed: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
