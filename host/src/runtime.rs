@@ -510,11 +510,12 @@ impl<P: Port> Control<'_, P> {
                     self.start_closing()?;
                 }
             }
-            Stage::Closing { since_ms } if !self.config.tactile_feedback => {
-                if now.saturating_sub(since_ms) >= self.config.open_loop_close_ms {
-                    self.send(HostMsg::SealAll, "open-loop seal", None)?;
-                    self.stage = Stage::Sealed;
-                }
+            Stage::Closing { since_ms }
+                if !self.config.tactile_feedback
+                    && now.saturating_sub(since_ms) >= self.config.open_loop_close_ms =>
+            {
+                self.send(HostMsg::SealAll, "open-loop seal", None)?;
+                self.stage = Stage::Sealed;
             }
             _ => {}
         }

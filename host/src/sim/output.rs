@@ -591,8 +591,7 @@ pub fn heatmap(r: &SimReport, snap: &Snapshot) -> RgbImage {
         let centre = r
             .observations
             .iter()
-            .filter(|o| o.sensor == sensor && o.t_ms <= snap.t_ms)
-            .next_back()
+            .rfind(|o| o.sensor == sensor && o.t_ms <= snap.t_ms)
             .and_then(|o| o.centre_mm);
         if let (Some(c), Some(cal)) = (centre, r.calibrations.get(sensor)) {
             let mm = cal.density.mm_per_px;

@@ -32,7 +32,7 @@ use dexitac_protocol::{HostMsg, ValveState};
 
 use crate::calibrate::{self, Calibration, CalibrationError};
 use crate::grasp::{Cause, CentreMm, Command};
-use crate::link::{Link, LinkConfig, LinkError, Port};
+use crate::link::{Link, LinkConfig, LinkError, LinkStats, Port};
 use crate::params::Params;
 use crate::pipeline::Pipeline;
 use crate::runtime::{
@@ -219,6 +219,8 @@ pub struct SimReport {
     pub loop_result: Result<StopReason, String>,
     /// The MCU's state at the end.
     pub mcu_at_end: McuSnapshot,
+    /// The host link's traffic counters.
+    pub link_stats: LinkStats,
     /// The grasping chambers.
     pub grasp_chambers: Vec<usize>,
     /// Simulated run time, s.
@@ -339,10 +341,11 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     }
     // Calibration done: the simulated time starts now.
     let clock = Clock::scaled(options.speed);
-    let mut firmware = dexitac_firmware::Config::default();
-    // The host gets the same wall-clock time to send a frame as on the rig.
-    firmware.host_silence_ms =
-        (f64::from(options.stall_tolerance_ms) * clock.speed().max(1.0)) as u32;
+    let firmware = dexitac_firmware::Config {
+        // The host gets the same wall-clock time to send a frame as on the rig.
+        host_silence_ms: (f64::from(options.stall_tolerance_ms) * clock.speed().max(1.0)) as u32,
+        ..dexitac_firmware::Config::default()
+    };
     let mcu = SimMcu::spawn_with_plant(
         SimMcuConfig {
             firmware,
@@ -415,6 +418,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     Ok(SimReport {
         sim_s,
         wall_s: wall_start.elapsed().as_secs_f64(),
+        link_stats: link.stats(),
         ..report
     })
 }
@@ -627,6 +631,7 @@ fn build_report(
         calibrations,
         loop_result,
         mcu_at_end,
+        link_stats: LinkStats::default(),
         grasp_chambers: control.grasp_chambers.clone(),
         sim_s: 0.0,
         wall_s: 0.0,
@@ -664,14 +669,16 @@ fn disturbance_timings(
                     .find(|(t, _, r)| *t >= d && *r == "disturbance: reopen inflation")
                     .map(|(t, _, _)| *t)
             });
-            // The valves cannot open before the decision; the sent time is
-            // rounded to the clock's ms, the MCU may apply it in that same ms.
-            let open = sent.and(detected).and_then(|d| {
+            // The first opening after the decision. The simulated MCU stamps
+            // a tick with the time it simulates; when its thread lags the
+            // clock by a few ms, the tick that applies the command carries a
+            // time slightly before the write: clamp to the write.
+            let open = sent.zip(detected).and_then(|(s, d)| {
                 plant
                     .transitions()
                     .iter()
                     .find(|(t, ch)| *t >= d && inflating(ch))
-                    .map(|(t, _)| *t)
+                    .map(|(t, _)| (*t).max(s))
             });
             let s = |t: Option<u64>| t.map(|t| t as f64 / 1e3);
             DisturbanceTiming {
