@@ -388,6 +388,74 @@ impl Panel {
     }
 }
 
+/// A 3x5 pixel font for the plot's labels: digits, a few capitals and signs.
+fn glyph(c: char) -> [u8; 5] {
+    // Each row: 3 bits, the leftmost pixel in bit 2.
+    match c {
+        '0' => [7, 5, 5, 5, 7],
+        '1' => [2, 6, 2, 2, 7],
+        '2' => [7, 1, 7, 4, 7],
+        '3' => [7, 1, 7, 1, 7],
+        '4' => [5, 5, 7, 1, 1],
+        '5' => [7, 4, 7, 1, 7],
+        '6' => [7, 4, 7, 5, 7],
+        '7' => [7, 1, 1, 1, 1],
+        '8' => [7, 5, 7, 5, 7],
+        '9' => [7, 5, 7, 1, 7],
+        '.' => [0, 0, 0, 0, 2],
+        '-' => [0, 0, 7, 0, 0],
+        '+' => [0, 2, 7, 2, 0],
+        '/' => [1, 1, 2, 4, 4],
+        '(' => [2, 4, 4, 4, 2],
+        ')' => [2, 1, 1, 1, 2],
+        'A' => [2, 5, 7, 5, 5],
+        'C' => [7, 4, 4, 4, 7],
+        'D' => [6, 5, 5, 5, 6],
+        'E' => [7, 4, 6, 4, 7],
+        'F' => [7, 4, 6, 4, 4],
+        'G' => [7, 4, 5, 5, 7],
+        'H' => [5, 5, 7, 5, 5],
+        'I' => [7, 2, 2, 2, 7],
+        'K' => [5, 5, 6, 5, 5],
+        'L' => [4, 4, 4, 4, 7],
+        'M' => [5, 7, 7, 5, 5],
+        'N' => [6, 5, 5, 5, 5],
+        'O' => [7, 5, 5, 5, 7],
+        'P' => [7, 5, 7, 4, 4],
+        'R' => [6, 5, 6, 5, 5],
+        'S' => [7, 4, 7, 1, 7],
+        'T' => [7, 2, 2, 2, 2],
+        'U' => [5, 5, 5, 5, 7],
+        'V' => [5, 5, 5, 5, 2],
+        'W' => [5, 5, 7, 7, 5],
+        'X' => [5, 5, 2, 5, 5],
+        _ => [0; 5],
+    }
+}
+
+/// Draws `text` (upper case) with its top-left at (x, y), `scale` px per font pixel.
+fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) {
+    for (i, ch) in text.chars().enumerate() {
+        let rows = glyph(ch.to_ascii_uppercase());
+        for (r, bits) in rows.iter().enumerate() {
+            for col in 0..3 {
+                if bits & (4 >> col) != 0 {
+                    for dy in 0..scale {
+                        for dx in 0..scale {
+                            put(
+                                img,
+                                x + (i as i64 * 4 + col) * scale + dx,
+                                y + r as i64 * scale + dy,
+                                c,
+                            );
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
 fn put(img: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {
     if x >= 0 && y >= 0 && (x as u32) < img.width() && (y as u32) < img.height() {
         img.put_pixel(x as u32, y as u32, c);
@@ -426,9 +494,9 @@ pub fn plot(r: &SimReport) -> RgbImage {
     let t_max_s = r.trace.last().map_or(1.0, |s| secs(s.t_ms)).max(1.0);
     let panel = |i: i64, lo: f64, hi: f64| Panel {
         x0: 40,
-        y0: 20 + i * 215,
+        y0: 20 + i * 210,
         w: w as i64 - 60,
-        h: 190,
+        h: 185,
         t_max_s,
         lo,
         hi,
@@ -451,6 +519,36 @@ pub fn plot(r: &SimReport) -> RgbImage {
         }
         p.frame(&mut img);
     }
+    let labels = [
+        format!("POKE FORCE (N) 0-{:.1}", max_force * 1.1),
+        "CONTACT CENTRE SHIFT (MM) 0-6, T1 0.5, T2 5".to_string(),
+        "GRASP VALVES (CHAMBER LANES, UP +, DOWN -)".to_string(),
+        "PRESSURE (KPA) -60-60: TANKS, GRASP CHAMBER".to_string(),
+    ];
+    for (p, label) in panels.iter().zip(&labels) {
+        text(&mut img, p.x0 + 6, p.y0 + 6, label, 2, BLACK);
+    }
+    let mut tick_s = 0.0;
+    while tick_s <= t_max_s {
+        let (x, _) = panels[3].px(tick_s, 0.0);
+        text(
+            &mut img,
+            x - 4,
+            panels[3].y0 + panels[3].h + 6,
+            &format!("{tick_s:.0}"),
+            2,
+            BLACK,
+        );
+        tick_s += 5.0;
+    }
+    text(
+        &mut img,
+        panels[3].x0 + panels[3].w - 60,
+        panels[3].y0 + panels[3].h + 24,
+        "T (S)",
+        2,
+        BLACK,
+    );
     let t = |s: &WorldState| secs(s.t_ms);
     // Force.
     let force: Vec<_> = r.trace.iter().map(|s| (t(s), Some(s.external_n))).collect();

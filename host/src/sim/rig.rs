@@ -49,6 +49,8 @@ use crate::PointPx;
 
 /// Working frame size of the simulated cameras (the paper's 640x480).
 const FRAME_SIZE_PX: (usize, usize) = (640, 480);
+/// How far the simulated MCU's tick stamps may trail the shared clock, ms.
+const MCU_LAG_MS: u64 = 50;
 /// The plant's trace period, ms of simulated time.
 const TRACE_PERIOD_MS: u64 = 10;
 /// Keep running this long after the object fell or was released, ms.
@@ -672,12 +674,13 @@ fn disturbance_timings(
             // The first opening after the decision. The simulated MCU stamps
             // a tick with the time it simulates; when its thread lags the
             // clock by a few ms, the tick that applies the command carries a
-            // time slightly before the write: clamp to the write.
+            // time slightly before the write: look back by that lag and
+            // clamp to the write.
             let open = sent.zip(detected).and_then(|(s, d)| {
                 plant
                     .transitions()
                     .iter()
-                    .find(|(t, ch)| *t >= d && inflating(ch))
+                    .find(|(t, ch)| *t + MCU_LAG_MS >= d && inflating(ch))
                     .map(|(t, _)| (*t).max(s))
             });
             let s = |t: Option<u64>| t.map(|t| t as f64 / 1e3);
