@@ -447,6 +447,26 @@ fn telemetry_arrives_at_the_requested_interval() {
 }
 
 #[test]
+fn telemetry_keeps_its_cadence_after_a_late_tick() {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.send(HostMsg::SetTelemetryInterval { interval_ms: 10 });
+    let start = b.rig.now_ms;
+    // Reports at 1 and 11 ms; the tick due at 21 ms comes at 23 ms.
+    b.ticks(20);
+    b.rig.now_ms += 2;
+    let mut sent = b.tick();
+    sent.extend(b.ticks(20));
+    let times: Vec<u32> = sent
+        .iter()
+        .filter_map(|m| match m {
+            McuMsg::Telemetry(t) => Some(t.time_ms - start),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(times, [23, 31, 41]);
+}
+
+#[test]
 fn late_ticks_count_as_overruns() {
     let mut b = Bench::new(Rig::fixed(0, 0));
     b.ticks(5);
