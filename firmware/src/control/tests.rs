@@ -120,8 +120,12 @@ struct Bench {
 
 impl Bench {
     fn new(rig: Rig) -> Bench {
+        Bench::with_config(rig, Config::default())
+    }
+
+    fn with_config(rig: Rig, config: Config) -> Bench {
         Bench {
-            ctl: Controller::new(Config::default(), ResetCause::PowerOn),
+            ctl: Controller::new(config, ResetCause::PowerOn),
             rig,
             tx: ByteQueue::new(),
             host_rx: Decoder::new(),
@@ -675,8 +679,8 @@ impl Observer {
     }
 }
 
-fn run_scenario(events: &[Event]) -> Result<Bench, TestCaseError> {
-    let mut b = Bench::new(Rig::model());
+fn run_scenario(events: &[Event], config: Config) -> Result<Bench, TestCaseError> {
+    let mut b = Bench::with_config(Rig::model(), config);
     let mut obs = Observer {
         last_state: ArmState::Disarmed,
         disarm_seen: false,
@@ -733,7 +737,7 @@ proptest! {
     fn safety_invariants_hold_for_any_commands_and_pressures(
         events in proptest::collection::vec(event(), 1..60)
     ) {
-        run_scenario(&events)?;
+        run_scenario(&events, Config::default())?;
     }
 
     /// Whatever happened before, a silent host finds the controller out of
@@ -742,8 +746,10 @@ proptest! {
     fn host_silence_always_ends_in_the_safe_state_by_the_deadline(
         events in proptest::collection::vec(event(), 0..40),
         arm_last in any::<bool>(),
+        host_silence_ms in 1u32..2_000,
     ) {
-        let mut b = run_scenario(&events)?;
+        let config = Config { host_silence_ms, ..Config::default() };
+        let mut b = run_scenario(&events, config)?;
         if arm_last {
             b.send(HostMsg::Arm);
         }
