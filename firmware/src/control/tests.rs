@@ -342,7 +342,10 @@ fn sensor_error_trips_with_sensor_fault() {
     b.tick();
     assert_eq!(b.ctl.state(), ArmState::Tripped);
     assert!(b.ctl.faults().contains(Fault::NegativeSensor));
-    assert_eq!(b.ctl.telemetry(0).negative_tank_pa, i32::MIN);
+    assert_eq!(
+        b.ctl.telemetry(0).negative_tank_pa,
+        dexitac_protocol::NO_READING_PA
+    );
 }
 
 #[test]
