@@ -62,8 +62,11 @@ pub struct FrameResult {
     pub field: Field,
     /// The contact, if any (working px).
     pub contact: Option<Contact>,
-    /// True when the density stages were skipped (nothing moved).
+    /// True when the density stages were skipped (nothing moved, or blank).
     pub skipped: bool,
+    /// Fewer than half the rest markers were found (blank, covered or
+    /// non-tactile frame): reported as no contact.
+    pub blank: bool,
     /// Density grid cells computed.
     pub density_cells: usize,
     /// Stage times.
@@ -112,7 +115,10 @@ impl Pipeline {
             0.5 * cal.pitch_px,
             cp.move_noise_px,
         );
-        let skipped = cp.skip_unmoved && field.moved.len() < cp.min_moved_markers;
+        // A frame with under half the rest markers is blank, covered or not
+        // a tactile image: no contact rather than a guess.
+        let blank = 2 * markers.len() < cal.rest_markers.len();
+        let skipped = blank || (cp.skip_unmoved && field.moved.len() < cp.min_moved_markers);
         let mut density_cells = 0;
         let mut region = None;
         let mut t2 = Instant::now();
@@ -151,6 +157,7 @@ impl Pipeline {
             field,
             contact,
             skipped,
+            blank,
             density_cells,
             times: StageTimes {
                 detect_ms: ms(t0, t1),
