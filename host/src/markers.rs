@@ -100,16 +100,26 @@ pub struct Detector {
     pub min_contrast: f32,
     /// Estimated marker radius, working px (sets the centroid window).
     pub radius_px: f64,
+    /// Search only `[x0, y0, x1, y1)` (working px; `None`: the whole frame).
+    /// The calibration sets it to the sensing area plus a margin.
+    pub window_px: Option<[usize; 4]>,
 }
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
-    let binned;
-    let (img, w, h, bin) = if det.bin == 2 && frame.width() >= 2 && frame.height() >= 2 {
-        binned = bin2(frame);
-        (&binned[..], frame.width() / 2, frame.height() / 2, 2)
+    let (fw, fh) = (frame.width(), frame.height());
+    let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
+    let (x1, y1) = (x1.min(fw), y1.min(fh));
+    let (x0, y0) = (x0.min(x1), y0.min(y1));
+    let sub;
+    let (img, w, h, bin) = if det.bin == 2 && x1 - x0 >= 2 && y1 - y0 >= 2 {
+        sub = bin2(frame, x0, y0, (x1 - x0) / 2, (y1 - y0) / 2);
+        (&sub[..], (x1 - x0) / 2, (y1 - y0) / 2, 2)
+    } else if (x0, y0, x1, y1) == (0, 0, fw, fh) {
+        (frame.data(), fw, fh, 1)
     } else {
-        (frame.data(), frame.width(), frame.height(), 1)
+        sub = crop(frame, x0, y0, x1 - x0, y1 - y0);
+        (&sub[..], x1 - x0, y1 - y0, 1)
     };
     let lobe = det.lobe_px.max(3) | 1;
     let margin = (3 * lobe - 1) / 2;
@@ -126,8 +136,8 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
             continue;
         }
         let guess = PointPx::new(
-            (x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
-            (y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+            (x0 + x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+            (y0 + y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
         );
         if let Some(pos) = refine(frame, guess, det.radius_px, det.min_contrast) {
             if taken.claim(pos, DUPLICATE_PX) {
@@ -167,12 +177,13 @@ impl Occupancy {
 
     /// Claims `p` unless a claimed point lies within `radius` (<= one cell).
     fn claim(&mut self, p: PointPx, radius: f64) -> bool {
-        let ci = ((p.x / Self::CELL_PX).floor().max(0.0) as usize).min(self.cols - 1);
-        let cj = ((p.y / Self::CELL_PX).floor().max(0.0) as usize).min(self.rows - 1);
+        // `as usize` saturates negatives to 0 and truncates (= floor for >= 0).
+        let ci = ((p.x / Self::CELL_PX) as usize).min(self.cols - 1);
+        let cj = ((p.y / Self::CELL_PX) as usize).min(self.rows - 1);
         for j in cj.saturating_sub(1)..=(cj + 1).min(self.rows - 1) {
             for i in ci.saturating_sub(1)..=(ci + 1).min(self.cols - 1) {
                 if let Some(q) = self.cells[j * self.cols + i] {
-                    if (q.x - p.x).hypot(q.y - p.y) < radius {
+                    if (q.x - p.x).powi(2) + (q.y - p.y).powi(2) < radius * radius {
                         return false;
                     }
                 }
@@ -290,6 +301,7 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
         min_strength: 1e-3,
         min_contrast: params.min_contrast,
         radius_px: 0.4 * full_lobe as f64 * std::f64::consts::SQRT_2,
+        window_px: None,
     };
     let all = detect(rest, &det);
     let strengths: Vec<f32> = all.list.iter().map(|m| m.strength).collect();
@@ -322,19 +334,29 @@ fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
 }
 
 /// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.
-fn bin2(frame: &GreyFrame) -> Vec<u8> {
-    let (w, h) = (frame.width() / 2, frame.height() / 2);
+/// `w x h` output pixels from the frame region starting at `(x0, y0)`.
+fn bin2(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
     let src = frame.data();
     let fw = frame.width();
     let mut out = Vec::with_capacity(w * h);
     for y in 0..h {
-        let r0 = &src[2 * y * fw..][..2 * w];
-        let r1 = &src[(2 * y + 1) * fw..][..2 * w];
+        let r0 = &src[(y0 + 2 * y) * fw + x0..][..2 * w];
+        let r1 = &src[(y0 + 2 * y + 1) * fw + x0..][..2 * w];
         out.extend(
             r0.chunks_exact(2)
                 .zip(r1.chunks_exact(2))
                 .map(|(a, b)| ((a[0] as u16 + a[1] as u16 + b[0] as u16 + b[1] as u16) >> 2) as u8),
         );
+    }
+    out
+}
+
+/// Copy of the `w x h` frame region starting at `(x0, y0)`.
+fn crop(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
+    let fw = frame.width();
+    let mut out = Vec::with_capacity(w * h);
+    for y in y0..y0 + h {
+        out.extend_from_slice(&frame.data()[y * fw + x0..y * fw + x0 + w]);
     }
     out
 }
@@ -445,7 +467,8 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// when the contrast is below `min_contrast` or the centroid runs away.
 fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
     let rw = radius_px.ceil() as i64 + 2;
-    let (cx, cy) = (guess.x.round() as i64, guess.y.round() as i64);
+    // Guesses are >= 0: adding 0.5 and truncating rounds (no libm call).
+    let (cx, cy) = ((guess.x + 0.5) as i64, (guess.y + 0.5) as i64);
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let (x0, x1) = ((cx - rw).max(0), (cx + rw).min(w - 1));
     let (y0, y1) = ((cy - rw).max(0), (cy + rw).min(h - 1));
@@ -575,6 +598,7 @@ mod tests {
                 min_strength: 1.0,
                 min_contrast: 6.0,
                 radius_px: 3.0,
+                window_px: None,
             };
             assert!(detect(&frame, &det).is_empty());
             assert!(matches!(

@@ -245,6 +245,7 @@ proptest! {
             min_strength: 1.0,
             min_contrast: 6.0,
             radius_px: 3.0,
+            window_px: None,
         };
         for m in markers::detect(&p.grey, &det).list {
             prop_assert!(m.pos.is_finite());
