@@ -384,8 +384,8 @@ pub fn pareto_plot(rows: &[Pooled], colours: &[[u8; 3]]) -> image::RgbImage {
     let (w, h) = (720u32, 540u32);
     let (left, right, top, bottom) = (60.0, 700.0, 20.0, 500.0);
     let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
-    let x_of = |ms: f64| left + (ms.max(0.1).min(1000.0).log10() + 1.0) / 4.0 * (right - left);
-    let y_of = |px: f64| bottom - (px.max(0.01).min(1000.0).log10() + 2.0) / 5.0 * (bottom - top);
+    let x_of = |ms: f64| left + (ms.clamp(0.1, 1000.0).log10() + 1.0) / 4.0 * (right - left);
+    let y_of = |px: f64| bottom - (px.clamp(0.01, 1000.0).log10() + 2.0) / 5.0 * (bottom - top);
     let mut line = |x0: f64, y0: f64, x1: f64, y1: f64, c: [u8; 3]| {
         let n = ((x1 - x0).abs().max((y1 - y0).abs()) as usize).max(1);
         for k in 0..=n {
@@ -412,7 +412,7 @@ pub fn pareto_plot(rows: &[Pooled], colours: &[[u8; 3]]) -> image::RgbImage {
     for (r, c) in rows.iter().zip(colours) {
         let x = x_of(r.total_median_ms);
         for (err, filled) in [(r.error_median_px, true), (r.error_p95_px, false)] {
-            if !err.is_finite() {
+            if !err.is_finite() || !x.is_finite() {
                 continue;
             }
             let y = y_of(err);
