@@ -282,6 +282,34 @@ mod tests {
     }
 
     #[test]
+    fn absolute_threshold_trips_on_the_rim_relative_does_not() {
+        // Why the relative rule is the default (SPEC section 3): with every
+        // frame going through the density (no skip), the paper's absolute
+        // T = 0.3 /mm^2 finds the density fall-off at the rim on a frame
+        // without contact; 0.75 x rest does not.
+        let cat = Category::NoContact;
+        let mut params = Params::default();
+        params.contact.skip_unmoved = false;
+        params.contact.centre = crate::params::CentreMethod::Density;
+        let sensor = cat.sensor(640, 480, 5);
+        let frame = synth::render(&cat.scene(&sensor, 300));
+        let relative = test_fixtures::calibrated(cat, 640, 480, &params);
+        let r = Pipeline::new(relative, params.clone())
+            .run(&frame.image)
+            .unwrap();
+        assert!(r.contact.is_none(), "{:?}", r.contact);
+        params.contact.threshold = crate::params::ThresholdMode::Absolute;
+        let absolute = test_fixtures::calibrated(cat, 640, 480, &params);
+        let c = Pipeline::new(absolute, params)
+            .run(&frame.image)
+            .unwrap()
+            .contact;
+        let c = c.expect("absolute rule finds the rim");
+        let from_centre = (c.centre.x - sensor.centre.x).hypot(c.centre.y - sensor.centre.y);
+        assert!(from_centre > 150.0, "{c:?}");
+    }
+
+    #[test]
     fn wrong_frame_size_is_an_error() {
         let params = Params::default();
         let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
