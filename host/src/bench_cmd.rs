@@ -85,6 +85,18 @@ fn run_inner(args: &BenchArgs) -> Result<(), String> {
             c.detect_ms, c.kde_ms, c.segment_ms, c.total_ms, n.total_ms
         );
     }
+    let _ = writeln!(
+        report,
+        "\n### Fast density path against the exact f64 reference (640x480, 3 nominal frames)\n"
+    );
+    let _ = writeln!(
+        report,
+        "| grid step px | max abs diff / rest density | mean abs diff / rest density |"
+    );
+    let _ = writeln!(report, "|---|---|---|");
+    for (step, worst, mean) in bench::density_difference(&[1, 2, 4, 8], 3, args.seed) {
+        let _ = writeln!(report, "| {step} | {worst:.2e} | {mean:.2e} |");
+    }
     let _ = writeln!(report, "\n### Per scene\n\n{details}");
     print!("{report}");
     let colours: Vec<[u8; 3]> = COLOURS.iter().map(|c| c.0).collect();

@@ -60,6 +60,15 @@ fn fixture() -> Fixture {
         let name = format!("press_{k}");
         if k == 2 {
             save_rgb(&f, &frames.join(format!("{name}.png")));
+        } else if k == 1 {
+            let img = &f.image;
+            let buf = image::GrayImage::from_raw(
+                img.width() as u32,
+                img.height() as u32,
+                img.data().to_vec(),
+            )
+            .unwrap();
+            buf.save(frames.join(format!("{name}.jpg"))).unwrap();
         } else {
             save_grey(&f, &frames.join(format!("{name}.png")));
         }
