@@ -1,5 +1,5 @@
 //! One criterion benchmark per pipeline stage on a synthetic 640x480 frame
-//! (nominal contact), plus the whole pipeline on a contact and a no-contact
+//! (nominal contact, default parameters: density grid step 8), plus the whole pipeline on a contact and a no-contact
 //! frame. `cargo bench -p dexitac --bench stages`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
@@ -44,9 +44,15 @@ fn stages(c: &mut Criterion) {
         b.iter(|| tracking::track(&cal.rest_markers, black_box(&found), 640, 480, 7.5, 0.3))
     });
     let field = tracking::track(&cal.rest_markers, &found, 640, 480, 7.5, 0.3);
-    c.bench_function("density_fast_s4_full_grid", |b| {
-        b.iter(|| density::estimate(black_box(&found), &cal.density, None))
-    });
+    for step in [4, 8] {
+        let setup = DensitySetup {
+            step_px: step,
+            ..cal.density
+        };
+        c.bench_function(&format!("density_fast_s{step}_full_grid"), |b| {
+            b.iter(|| density::estimate(black_box(&found), &setup, None))
+        });
+    }
     let exact = DensitySetup {
         mode: DensityMode::Exact,
         ..cal.density
@@ -58,7 +64,7 @@ fn stages(c: &mut Criterion) {
     });
     group.finish();
     let map = density::estimate(&found, &cal.density, None);
-    c.bench_function("contact_segment_s4", |b| {
+    c.bench_function("contact_segment_s8", |b| {
         b.iter(|| {
             contact::segment(
                 black_box(&map),
