@@ -243,17 +243,27 @@ pub fn fingertip_pose(
     finger: FingerType,
     joints: &FingerJoints,
 ) -> Transform {
-    let t_mm = geometry.connector_thickness_mm;
     let rot = rot_transform(geometry, joints.rot_angle_rad);
     let dex = dex_transform(&joints.dex);
     let (first, second) = match finger {
         FingerType::RotDex => (rot, dex),
         FingerType::DexRot => (dex, rot),
     };
-    Transform::translation(0.0, 0.0, t_mm)
-        .then(&first)
-        .then(&Transform::translation(0.0, 0.0, 2.0 * t_mm))
-        .then(&second)
+    base_part(geometry, &first).then(&tip_part(geometry, &second))
+}
+
+/// The palm half of the chain: `Tz(t) * first joint`. The fingertip pose
+/// is `base_part(first) * tip_part(second)`; the workspace sampler
+/// precomputes each half once per joint state.
+pub fn base_part(geometry: &JointGeometry, first_joint: &Transform) -> Transform {
+    Transform::translation(0.0, 0.0, geometry.connector_thickness_mm).then(first_joint)
+}
+
+/// The tip half of the chain: `Tz(2 t) * second joint * Tz(t + fingertip)`.
+pub fn tip_part(geometry: &JointGeometry, second_joint: &Transform) -> Transform {
+    let t_mm = geometry.connector_thickness_mm;
+    Transform::translation(0.0, 0.0, 2.0 * t_mm)
+        .then(second_joint)
         .then(&Transform::translation(
             0.0,
             0.0,
@@ -399,7 +409,62 @@ mod tests {
         assert!(close(z[0], 1.0, 1e-15) && close(z[2], 0.0, 1e-15));
     }
 
+    #[test]
+    fn zero_pressure_fingers_stand_straight_out_of_their_mounts() {
+        for preset in crate::gripper::Preset::ALL {
+            let c = preset.config();
+            let tips = gripper_forward(&c, &[0.0; 8]).unwrap();
+            // 2 + 26 + 2*2 + 26 + 2 + 31 mm.
+            let length_mm = 91.0;
+            for (mount, tip) in c.fingers.iter().zip(&tips) {
+                let base = mount.transform();
+                let axis = base.z_axis();
+                for (k, a) in axis.iter().enumerate() {
+                    let want = base.translation_mm[k] + length_mm * a;
+                    assert!(close(tip.translation_mm[k], want, 1e-9), "{preset:?}");
+                }
+                assert_transforms_close(
+                    &Transform {
+                        translation_mm: [0.0; 3],
+                        ..*tip
+                    },
+                    &Transform {
+                        translation_mm: [0.0; 3],
+                        ..base
+                    },
+                    1e-12,
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn fingers_reject_nan_pressures() {
+        let c = crate::gripper::Preset::HookGrip.config();
+        let mut p = [0.0; 8];
+        p[5] = f64::NAN;
+        assert!(gripper_forward(&c, &p).is_err());
+        assert!(finger_forward(&c, FingerType::RotDex, f64::NAN, [0.0; 3]).is_err());
+    }
+
     proptest! {
+        #[test]
+        fn any_finite_pressures_give_a_valid_pose_within_reach(
+            p in proptest::array::uniform4(-1e6f64..1e6),
+            dex_rot in any::<bool>(),
+        ) {
+            let c = crate::gripper::Preset::PinchGrip.config();
+            let finger = if dex_rot { FingerType::DexRot } else { FingerType::RotDex };
+            let t = finger_forward(&c, finger, p[0], [p[1], p[2], p[3]]).unwrap();
+            assert_orthonormal(&t.rotation, 1e-9);
+            let [x, y, z] = t.translation_mm;
+            prop_assert!((x * x + y * y + z * z).sqrt() <= crate::workspace::reach_mm(&c) + 1e-9);
+            // Beyond the tank range the pose is the one at the limit.
+            let clamp = |v: f64| v.clamp(c.pressure.min_kpa, c.pressure.max_kpa);
+            let at_limit = finger_forward(&c, finger, clamp(p[0]), [clamp(p[1]), clamp(p[2]), clamp(p[3])]).unwrap();
+            prop_assert_eq!(t, at_limit);
+        }
+
         #[test]
         fn closed_form_arc_equals_the_dh_product(
             length in 0.0f64..200.0,

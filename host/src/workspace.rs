@@ -24,15 +24,17 @@
 
 use image::{Rgb, RgbImage};
 
-use crate::actuator::PressureError;
+use crate::actuator::{dex_state, rot_angle_rad, PressureError};
 use crate::gripper::{FingerType, GripperConfig};
-use crate::kinematics::finger_forward;
+use crate::kinematics::{
+    base_part, dex_transform, finger_forward, rot_transform, tip_part, Transform,
+};
 
 /// Fewest pressure levels per chamber (the two ends of the range).
 pub const MIN_LEVELS: usize = 2;
 /// Most pressure levels per chamber.
 pub const MAX_LEVELS: usize = 1000;
-/// Most grid points: 2e8, about 25 s of forward kinematics in release
+/// Most grid points: 2e8, about 4 s of [`volume`] in release
 /// (host/KINEMATICS.md).
 pub const MAX_POINTS: u64 = 200_000_000;
 /// Smallest voxel edge, mm: keeps the occupancy bitmap below ~1 GB for a
@@ -147,7 +149,7 @@ impl Grid {
     /// A grid on which neighbouring fingertip positions land at most about
     /// `gap_mm` apart. Each chamber step moves the tip by at most the reach
     /// times the joint rotation per step (plus the Dex extension per step);
-    /// the measured gap is about 0.75 to 0.85 of that bound
+    /// the measured gap is about 0.7 to 0.85 of that bound
     /// (host/KINEMATICS.md), so the bound is set to `1.1 gap_mm`. Levels are
     /// clamped to `MIN_LEVELS..=MAX_LEVELS`; [`volume`] reports the gap it
     /// measured.
@@ -293,8 +295,76 @@ impl Voxels {
     }
 }
 
-fn distance(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+fn distance_sq(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)
+}
+
+/// The two halves of the finger chain ([`base_part`] and [`tip_part`]),
+/// computed once per Rot level and once per Dex grid point, so a grid point
+/// costs one transform-point product instead of the full forward
+/// kinematics. The half at the palm is kept as a transform, the tip half
+/// only as its end point.
+enum Halves {
+    /// Rot-Dex: Rot half at the palm.
+    RotFirst {
+        rot: Vec<Transform>,
+        dex: Vec<[f64; 3]>,
+    },
+    /// Dex-Rot: Dex half at the palm.
+    DexFirst {
+        rot: Vec<[f64; 3]>,
+        dex: Vec<Transform>,
+    },
+}
+
+impl Halves {
+    fn new(config: &GripperConfig, finger: FingerType, grid: Grid) -> Result<Self, WorkspaceError> {
+        let g = &config.geometry;
+        let rot_joints = pressure_levels(config, grid.rot_levels)
+            .into_iter()
+            .map(|p| {
+                Ok(rot_transform(
+                    g,
+                    rot_angle_rad(&config.rot, &config.pressure, p)?,
+                ))
+            })
+            .collect::<Result<Vec<_>, PressureError>>()?;
+        let p = pressure_levels(config, grid.dex_levels);
+        let mut dex_joints = Vec::with_capacity(p.len().pow(3));
+        for &d0 in &p {
+            for &d1 in &p {
+                for &d2 in &p {
+                    let state = dex_state(&config.dex, &config.pressure, [d0, d1, d2])?;
+                    dex_joints.push(dex_transform(&state));
+                }
+            }
+        }
+        let base = |joints: Vec<Transform>| joints.iter().map(|t| base_part(g, t)).collect();
+        let tip = |joints: Vec<Transform>| {
+            joints
+                .iter()
+                .map(|t| tip_part(g, t).translation_mm)
+                .collect()
+        };
+        Ok(match finger {
+            FingerType::RotDex => Halves::RotFirst {
+                rot: base(rot_joints),
+                dex: tip(dex_joints),
+            },
+            FingerType::DexRot => Halves::DexFirst {
+                rot: tip(rot_joints),
+                dex: base(dex_joints),
+            },
+        })
+    }
+
+    /// Fingertip position for Rot level `i` and Dex grid point `j`.
+    fn tip(&self, i: usize, j: usize) -> [f64; 3] {
+        match self {
+            Halves::RotFirst { rot, dex } => rot[i].apply(dex[j]),
+            Halves::DexFirst { rot, dex } => dex[j].apply(rot[i]),
+        }
+    }
 }
 
 /// Checks a voxel edge: finite and at least [`MIN_VOXEL_MM`].
@@ -307,8 +377,8 @@ pub fn check_voxel(voxel_mm: f64) -> Result<(), WorkspaceError> {
 }
 
 /// Voxel-occupancy volume of the finger's workspace (see the module doc),
-/// streaming over the grid (memory: two `dex_levels^3` slabs plus the
-/// bitmap).
+/// streaming over the grid (memory: about 150 bytes per Dex grid point,
+/// `dex_levels^3` of them, plus the bitmap).
 pub fn volume(
     config: &GripperConfig,
     finger: FingerType,
@@ -317,20 +387,18 @@ pub fn volume(
 ) -> Result<VolumeEstimate, WorkspaceError> {
     grid.check()?;
     check_voxel(voxel_mm)?;
-    let rot = pressure_levels(config, grid.rot_levels);
-    let p = pressure_levels(config, grid.dex_levels);
+    let halves = Halves::new(config, finger, grid)?;
     let n = grid.dex_levels;
     let slab_len = n * n * n;
     let mut voxels = Voxels::new(reach_mm(config), voxel_mm);
     let mut prev = vec![[0.0; 3]; slab_len];
     let mut cur = vec![[0.0; 3]; slab_len];
-    let mut gap: f64 = 0.0;
+    let mut gap_sq: f64 = 0.0;
     let mut min_mm = [f64::INFINITY; 3];
     let mut max_mm = [f64::NEG_INFINITY; 3];
-    for (i0, &rot_kpa) in rot.iter().enumerate() {
+    for i0 in 0..grid.rot_levels {
         for (j, tip_slot) in cur.iter_mut().enumerate() {
-            let dex_kpa = [p[j / (n * n)], p[(j / n) % n], p[j % n]];
-            let tip = finger_forward(config, finger, rot_kpa, dex_kpa)?.translation_mm;
+            let tip = halves.tip(i0, j);
             voxels.mark(tip);
             for k in 0..3 {
                 min_mm[k] = min_mm[k].min(tip[k]);
@@ -342,15 +410,16 @@ pub fn volume(
             // Neighbours along Dex 2, Dex 1, Dex 0 (strides 1, n, n^2).
             for (stride, coord) in [(1, j % n), (n, (j / n) % n), (n * n, j / (n * n))] {
                 if coord + 1 < n {
-                    gap = gap.max(distance(cur[j], cur[j + stride]));
+                    gap_sq = gap_sq.max(distance_sq(cur[j], cur[j + stride]));
                 }
             }
             if i0 > 0 {
-                gap = gap.max(distance(cur[j], prev[j]));
+                gap_sq = gap_sq.max(distance_sq(cur[j], prev[j]));
             }
         }
         std::mem::swap(&mut prev, &mut cur);
     }
+    let gap = gap_sq.sqrt();
     let occupied_voxels = voxels.count();
     Ok(VolumeEstimate {
         volume_mm3: occupied_voxels as f64 * voxel_mm.powi(3),
@@ -553,7 +622,25 @@ mod tests {
         assert_eq!(e, v.extents);
         // Every tip is within the reach.
         let reach = reach_mm(&c);
-        assert!(pts.iter().all(|s| distance(s.tip_mm, [0.0; 3]) <= reach));
+        assert!(pts
+            .iter()
+            .all(|s| distance_sq(s.tip_mm, [0.0; 3]).sqrt() <= reach));
+    }
+
+    #[test]
+    fn precomputed_halves_give_exactly_the_forward_kinematics() {
+        let c = TipPoint::Fingertip.config(&Preset::ClosureGrip.config());
+        let grid = Grid {
+            rot_levels: 4,
+            dex_levels: 3,
+        };
+        for finger in [FingerType::RotDex, FingerType::DexRot] {
+            let halves = Halves::new(&c, finger, grid).unwrap();
+            let pts = sample(&c, finger, grid).unwrap();
+            for (k, s) in pts.iter().enumerate() {
+                assert_eq!(halves.tip(k / 27, k % 27), s.tip_mm, "{finger:?} {k}");
+            }
+        }
     }
 
     #[test]
