@@ -242,6 +242,9 @@ pub enum FitError {
         /// Largest minus smallest pressure, kPa.
         spread_kpa: f64,
     },
+    /// The values are so large that the sums overflow.
+    #[error("values too large to fit (sums overflow f64)")]
+    Overflow,
     /// All angles equal: the joint did not move, R^2 is undefined.
     #[error("degenerate data: the angle never changes ({angle_deg} deg): did the joint move?")]
     ConstantAngle {
@@ -334,6 +337,12 @@ pub fn fit_line(points: &[(f64, f64)]) -> Result<LineFit, FitError> {
         p_min = p_min.min(p);
         p_max = p_max.max(p);
     }
+    if ![mean_p, mean_a, sxx, sxy, syy]
+        .iter()
+        .all(|v| v.is_finite())
+    {
+        return Err(FitError::Overflow);
+    }
     // Spread below ~1e-9 of the pressures' magnitude is rounding noise.
     let spread_kpa = p_max - p_min;
     if spread_kpa <= 1e-9 * (1.0 + mean_p.abs()) {
@@ -350,6 +359,9 @@ pub fn fit_line(points: &[(f64, f64)]) -> Result<LineFit, FitError> {
         let r = a - (slope * p + intercept);
         ss_res += r * r;
         max_abs = max_abs.max(r.abs());
+    }
+    if !(slope.is_finite() && intercept.is_finite() && ss_res.is_finite()) {
+        return Err(FitError::Overflow);
     }
     Ok(LineFit {
         slope_deg_per_kpa: slope,
@@ -410,6 +422,25 @@ mod tests {
             fit_line(&[(1.0, 2.0), (2.0, 2.0), (3.0, 2.0)]),
             Err(FitError::ConstantAngle { .. })
         ));
+        assert_eq!(
+            fit_line(&[(1e300, 2.0), (-1e300, 3.0), (0.0, 1.0)]),
+            Err(FitError::Overflow)
+        );
+    }
+
+    proptest! {
+        #[test]
+        fn fit_never_panics_and_returns_finite_numbers(
+            pts in proptest::collection::vec((-1e308f64..1e308, -1e308f64..1e308), 0..20),
+        ) {
+            if let Ok(fit) = fit_line(&pts) {
+                prop_assert!(fit.slope_deg_per_kpa.is_finite());
+                prop_assert!(fit.intercept_deg.is_finite());
+                prop_assert!(fit.r_squared.is_finite());
+                prop_assert!(fit.rms_residual_deg.is_finite());
+                prop_assert!(fit.max_abs_residual_deg.is_finite());
+            }
+        }
     }
 
     #[test]

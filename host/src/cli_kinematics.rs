@@ -145,7 +145,7 @@ pub struct WorkspaceArgs {
     #[arg(long, value_enum, default_value = "joint-end")]
     point: PointArg,
     /// Pressure levels per chamber for the points CSV and the views
-    /// (levels^4 points).
+    /// (levels^4 points, 2..=40).
     #[arg(long, default_value_t = 11)]
     levels: usize,
     /// Voxel edge of the volume estimate, mm; the pressure grid of the
@@ -184,6 +184,9 @@ pub enum JointArg {
     Dex,
 }
 
+/// Most pressure levels per chamber in the points CSV.
+const MAX_CSV_LEVELS: usize = 40;
+
 /// Most pixels per side of a view.
 const MAX_IMAGE_PX: u32 = 8192;
 
@@ -196,6 +199,12 @@ pub fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
         });
     }
     workspace::check_voxel(args.voxel_mm)?;
+    if !(workspace::MIN_LEVELS..=MAX_CSV_LEVELS).contains(&args.levels) {
+        return Err(CliError::Arg {
+            arg: "levels",
+            reason: "must be 2..=40 (40^4 = 2.56 million CSV rows)",
+        });
+    }
     let (base, source) = match (&args.config, args.preset) {
         (Some(path), _) => (GripperConfig::load(path)?, path.display().to_string()),
         (None, Some(p)) => {
@@ -319,6 +328,9 @@ fn workspace_json(
         "finger": finger,
         "point": point,
         "config": config.name,
+        "config_description": config.description,
+        "config_finger": config.finger,
+        "assembly": config.assembly,
         "config_source": source,
         "frame": "finger base frame: z along the straight finger, Rot joint bending towards +x; mm",
         "pressure_range_kpa": [config.pressure.min_kpa, config.pressure.max_kpa],

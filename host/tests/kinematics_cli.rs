@@ -66,6 +66,7 @@ fn workspace_writes_points_views_and_volume() {
     }
 
     assert_eq!(report["finger"], "dex-rot");
+    assert_eq!(report["config"], "PinchGrip");
     assert_eq!(report["point"], "joint-end");
     assert_eq!(report["points_csv"]["samples"], 256);
     let volume = report["volume"]["volume_mm3"].as_f64().unwrap();
@@ -118,6 +119,20 @@ fn workspace_reports_a_bad_config_and_a_bad_argument() {
     ]);
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr(&out).contains("voxel"), "{}", stderr(&out));
+    // Nothing is written before the arguments are checked.
+    assert!(!out_dir.exists());
+
+    let out = dexitac(&[
+        "workspace",
+        "--finger",
+        "rot-dex",
+        "--levels",
+        "41",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr(&out).contains("--levels"), "{}", stderr(&out));
 }
 
 #[test]
