@@ -3,10 +3,12 @@
 //!
 //! Input: a [`GripperConfig`] (joint geometry, actuator models, pressure
 //! range) and a [`FingerType`]. The pressure space of a finger is its four
-//! chambers (Rot, Dex 0..2), each sampled on `levels` evenly spaced
-//! pressures from `pressure.min_kpa` to `pressure.max_kpa`: `levels^4`
-//! points, in the finger's base frame (z along the straight finger, Rot
-//! bending towards +x), mm.
+//! chambers (Rot, Dex 0..2); a [`Grid`] samples each on evenly spaced
+//! pressures from `pressure.min_kpa` to `pressure.max_kpa`
+//! (`rot_levels * dex_levels^3` points). Output points are in the finger's
+//! base frame (z along the straight finger, Rot bending towards +x), mm.
+//! [`TipPoint`] picks the joint end (as the paper measured) or the
+//! fingertip.
 //!
 //! **Volume** ([`volume`]): voxel occupancy. The fingertip positions of a
 //! dense grid are binned into cubes of edge `voxel_mm`; the volume is the
@@ -16,7 +18,10 @@
 //! is small against the workspace (the boundary layer of partly covered
 //! voxels adds about `area * voxel_mm / 2`). [`VolumeEstimate`] reports the
 //! largest distance between grid neighbours (`max_neighbour_gap_mm`) so
-//! a caller can see whether the first condition holds. We chose voxels
+//! a caller can see whether the first condition holds, and
+//! [`Grid::for_gap`] sizes the grid for a given gap. Since the occupancy is
+//! about `V0 + c * voxel_mm`, `2 V(v) - V(2v)` extrapolates to `V0`
+//! (`dexitac workspace` reports both). We chose voxels
 //! over a convex hull because the workspaces are not convex (the Rot-Dex
 //! set is a bent shell), so a hull would count empty space as reachable.
 //! The settings of `dexitac workspace` and the measured convergence are in
