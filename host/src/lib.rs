@@ -50,3 +50,9 @@ impl PointPx {
         self.x.is_finite() && self.y.is_finite()
     }
 }
+
+// Gripper configurations, actuator model, kinematics and workspace (issue 6).
+pub mod actuator;
+pub mod gripper;
+pub mod kinematics;
+pub mod workspace;

@@ -2,6 +2,7 @@
 
 mod analyze;
 mod bench_cmd;
+mod cli_kinematics;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -29,6 +30,12 @@ enum Command {
     /// Accuracy against run time on synthetic scenes, per setting and scene
     /// category (Markdown to stdout, plot and tables to --out-dir).
     BenchPipeline(BenchArgs),
+    /// Workspace of one finger: points CSV, X-Y / X-Z / 3-D views (PNG),
+    /// extents and volume (JSON) in --out.
+    Workspace(cli_kinematics::WorkspaceArgs),
+    /// Fit the linear pressure -> angle actuator model to measured
+    /// `pressure_kpa,angle_deg` rows by least squares.
+    FitActuator(cli_kinematics::FitArgs),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -73,6 +80,12 @@ fn main() -> ExitCode {
     match cli.command {
         Some(Command::Analyze(args)) => analyze::run(&args),
         Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
+        Some(Command::Workspace(args)) => {
+            cli_kinematics::exit("workspace", cli_kinematics::run_workspace(&args))
+        }
+        Some(Command::FitActuator(args)) => {
+            cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
+        }
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",
