@@ -495,20 +495,21 @@ fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) 
     if contrast < min_contrast.max(1.0) {
         return None;
     }
-    let cut = lo as i32 + ((hi as i32 - lo as i32) >> 1);
-    let (mut sw, mut sx, mut sy) = (0i32, 0i32, 0i32);
+    // lo + (hi - lo) / 2 <= 255.
+    let cut = lo + ((hi - lo) >> 1);
+    let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
     for y in y0..=y1 {
-        let (mut rw_sum, mut rx_sum) = (0i32, 0i32);
+        let (mut rw_sum, mut rx_sum) = (0u32, 0u32);
         for (k, &v) in row(y).iter().enumerate() {
-            let wgt = (v as i32 - cut).max(0);
+            let wgt = v.saturating_sub(cut) as u32;
             rw_sum += wgt;
-            rx_sum += wgt * k as i32;
+            rx_sum += wgt * k as u32;
         }
         sw += rw_sum;
         sx += rx_sum;
-        sy += rw_sum * (y - y0) as i32;
+        sy += rw_sum * (y - y0) as u32;
     }
-    if sw <= 0 {
+    if sw == 0 {
         return None;
     }
     let c = PointPx::new(
