@@ -211,8 +211,13 @@ fn luma<const C: usize>(data: &[u8]) -> Vec<u8> {
     let mut out = vec![0u8; data.len() / C];
     for (o, p) in out.iter_mut().zip(data.chunks_exact(C)) {
         let (r, g, b) = (p[0] as u16, p[1] as u16, p[2] as u16);
-        // 77 + 150 + 29 = 256: the sum fits u16 (255 * 256 = 65280).
-        *o = ((77 * r + 150 * g + 29 * b) >> 8) as u8;
+        // 77 + 150 + 29 = 256: the sum fits u16 (255 * 256 = 65280), so the
+        // wrapping ops never wrap; they only drop the overflow checks.
+        let y = r
+            .wrapping_mul(77)
+            .wrapping_add(g.wrapping_mul(150))
+            .wrapping_add(b.wrapping_mul(29));
+        *o = (y >> 8) as u8;
     }
     out
 }

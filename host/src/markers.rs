@@ -206,29 +206,40 @@ fn bright_peaks(
     margin: usize,
     min_level: u8,
 ) -> Vec<(usize, usize, u8)> {
+    const CHUNK: usize = 16;
+    let m = margin.max(1);
     let mut out = Vec::new();
-    for y in margin.max(1)..h - margin.max(1) {
+    for y in m..h - m {
         let (up, row, down) = (
             &img[(y - 1) * w..y * w],
             &img[y * w..(y + 1) * w],
             &img[(y + 1) * w..(y + 2) * w],
         );
-        for x in margin.max(1)..w - margin.max(1) {
-            let v = row[x];
-            if v < min_level || v == 0 {
-                continue;
+        let mut start = m;
+        while start < w - m {
+            let end = (start + CHUNK).min(w - m);
+            // Skip dark runs with one vectorisable max.
+            let brightest = row[start..end].iter().fold(0u8, |a, &v| a.max(v));
+            if brightest >= min_level.max(1) {
+                for x in start..end {
+                    let v = row[x];
+                    if v < min_level || v == 0 {
+                        continue;
+                    }
+                    if v > up[x - 1]
+                        && v > up[x]
+                        && v > up[x + 1]
+                        && v > row[x - 1]
+                        && v >= row[x + 1]
+                        && v >= down[x - 1]
+                        && v >= down[x]
+                        && v >= down[x + 1]
+                    {
+                        out.push((x, y, v));
+                    }
+                }
             }
-            if v > up[x - 1]
-                && v > up[x]
-                && v > up[x + 1]
-                && v > row[x - 1]
-                && v >= row[x + 1]
-                && v >= down[x - 1]
-                && v >= down[x]
-                && v >= down[x + 1]
-            {
-                out.push((x, y, v));
-            }
+            start = end;
         }
     }
     out
@@ -345,7 +356,14 @@ fn bin2(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> 
         out.extend(
             r0.chunks_exact(2)
                 .zip(r1.chunks_exact(2))
-                .map(|(a, b)| ((a[0] as u16 + a[1] as u16 + b[0] as u16 + b[1] as u16) >> 2) as u8),
+                // 4 x 255 fits u16: wrapping ops only skip the overflow check.
+                .map(|(a, b)| {
+                    let sum = (a[0] as u16)
+                        .wrapping_add(a[1] as u16)
+                        .wrapping_add(b[0] as u16)
+                        .wrapping_add(b[1] as u16);
+                    (sum >> 2) as u8
+                }),
         );
     }
     out
@@ -497,17 +515,20 @@ fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) 
     }
     // lo + (hi - lo) / 2 <= 255.
     let cut = lo + ((hi - lo) >> 1);
+    // Wrapping arithmetic lets the loop vectorise with overflow checks on
+    // (release profile); it cannot wrap: a window has at most 63 x 63
+    // pixels of weight <= 255 and index <= 62, so every sum < 2^26.
     let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
     for y in y0..=y1 {
         let (mut rw_sum, mut rx_sum) = (0u32, 0u32);
         for (k, &v) in row(y).iter().enumerate() {
             let wgt = v.saturating_sub(cut) as u32;
-            rw_sum += wgt;
-            rx_sum += wgt * k as u32;
+            rw_sum = rw_sum.wrapping_add(wgt);
+            rx_sum = rx_sum.wrapping_add(wgt.wrapping_mul(k as u32));
         }
-        sw += rw_sum;
-        sx += rx_sum;
-        sy += rw_sum * (y - y0) as u32;
+        sw = sw.wrapping_add(rw_sum);
+        sx = sx.wrapping_add(rx_sum);
+        sy = sy.wrapping_add(rw_sum.wrapping_mul((y - y0) as u32));
     }
     if sw == 0 {
         return None;
