@@ -4,9 +4,9 @@
 //! `cargo bench -p dexitac-firmware` (release profile: opt-level "s", fat
 //! LTO, the firmware's own settings). Scenario: armed, both pumps
 //! regulating a simulated tank pair, one chamber inflating, telemetry every
-//! 10 ms, a heartbeat frame every 100 ms. The tank model is advanced outside
-//! the timed region... it is part of the loop here but measured separately
-//! and subtracted (`model only` line).
+//! 10 ms, a heartbeat frame every 100 ms. The simulated tanks that feed the
+//! sensor readings run in the same loop; a second run with the model alone
+//! (`model only`) gives their share, and the difference is the control core.
 //!
 //! Pass an iteration count as the first argument to run that many ticks
 //! without timing (for `valgrind --tool=callgrind`, see firmware/README.md).

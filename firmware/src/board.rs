@@ -347,6 +347,7 @@ fn control_loop<S: sensors::TankSensors>(
 ) -> ! {
     let mut last_ms = io.now_ms();
     let mut rx_chunk = [0u8; RX_CHUNK_LEN];
+    let mut last_report = Report::default();
     #[cfg(feature = "qemu-cost")]
     let mut meter = cost::Meter::new(controller, io, tx_queue);
     loop {
@@ -375,7 +376,43 @@ fn control_loop<S: sensors::TankSensors>(
         #[cfg(feature = "qemu-cost")]
         meter.record(start);
         watchdog.feed();
+        if now_ms % REPORT_PERIOD_MS == 0 {
+            last_report = report_link(controller, last_report);
+        }
     }
+}
+
+/// How often the control loop logs link errors (if any are new).
+const REPORT_PERIOD_MS: u32 = 1_000;
+
+/// The link counters at the last log line.
+#[derive(Default, Clone, Copy, PartialEq, Eq)]
+struct Report {
+    frame_errors: u32,
+    tx_dropped: u32,
+    rx_overflows: u32,
+    loop_overruns: u32,
+}
+
+/// Logs the link and loop counters when they changed since `last`.
+fn report_link(controller: &Controller, last: Report) -> Report {
+    let link = controller.link_stats();
+    let now = Report {
+        frame_errors: link.frame_errors,
+        tx_dropped: link.tx_dropped,
+        rx_overflows: RX_OVERFLOWS.load(Ordering::Relaxed),
+        loop_overruns: controller.loop_overruns(),
+    };
+    if now != last {
+        defmt::warn!(
+            "bad frames {}, tx dropped {}, rx overflows {}, loop overruns {}",
+            now.frame_errors,
+            now.tx_dropped,
+            now.rx_overflows,
+            now.loop_overruns
+        );
+    }
+    now
 }
 
 /// Drives every valve and pump output low (closed / off) by direct register
@@ -396,7 +433,8 @@ fn force_safe_outputs() {
 }
 
 /// Stops here until the independent watchdog resets the MCU (under QEMU,
-/// which does not model the watchdog: exits through semihosting).
+/// which does not model the watchdog: exits through semihosting). Before
+/// the watchdog is started (early in `run`) it stops for good, outputs safe.
 fn halt() -> ! {
     #[cfg(feature = "qemu")]
     cortex_m_semihosting::debug::exit(cortex_m_semihosting::debug::EXIT_FAILURE);

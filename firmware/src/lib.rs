@@ -53,6 +53,10 @@
 //! | control loop stalled | independent watchdog not fed (board) | MCU reset -> safe state, `ResetCause::IndependentWatchdog` in the hello reply | host re-arms |
 //! | panic | panic handler (board) | outputs forced to the safe state, then watchdog reset | host re-arms |
 //!
+//! A tank whose sensor gives no reading is reported as
+//! [`NO_READING_PA`](dexitac_protocol::NO_READING_PA) (`i32::MIN`) Pa in
+//! telemetry and fault events (the sensor fault flag says why).
+//!
 //! Over-limit and sensor conditions are also evaluated while disarmed: they
 //! show in the telemetry's fault flags and make `Arm` fail with
 //! [`NackReason::Refused`](dexitac_protocol::NackReason::Refused); the pumps

@@ -97,6 +97,20 @@ mod tests {
         assert_eq!(CALIBRATION.counts_to_pa(3746), Ok(SENSOR_MAX_PA));
     }
 
+    proptest::proptest! {
+        /// Every count converts to an in-range pressure or an error, and the
+        /// conversion never decreases with the count.
+        #[test]
+        fn conversion_is_monotonic_and_in_range(a in 0u16..=4095, b in 0u16..=4095) {
+            let (lo, hi) = (a.min(b), a.max(b));
+            if let (Ok(p_lo), Ok(p_hi)) = (CALIBRATION.counts_to_pa(lo), CALIBRATION.counts_to_pa(hi)) {
+                proptest::prop_assert!(p_lo <= p_hi);
+                proptest::prop_assert!((SENSOR_MIN_PA..=SENSOR_MAX_PA).contains(&p_lo));
+                proptest::prop_assert!((SENSOR_MIN_PA..=SENSOR_MAX_PA).contains(&p_hi));
+            }
+        }
+    }
+
     #[test]
     fn limits_round_trip_within_one_count() {
         for pa in [-57_000, 50_000, -100_000, 300_000, 0] {

@@ -136,6 +136,41 @@ mod tests {
     use super::*;
     use crate::control::valves::SAFE_CHAMBERS;
 
+    fn chambers_strategy() -> impl proptest::strategy::Strategy<Value = Chambers> {
+        use proptest::prelude::*;
+        proptest::array::uniform8(prop_oneof![
+            Just(ValveState::Hold),
+            Just(ValveState::Inflate),
+            Just(ValveState::Deflate)
+        ])
+    }
+
+    proptest::proptest! {
+        /// Numerical stability: whatever the outputs and step lengths, every
+        /// pressure stays between the two stall pressures.
+        #[test]
+        fn pressures_stay_between_the_stall_pressures(
+            steps in proptest::collection::vec(
+                (0u32..2_000, proptest::bool::ANY, proptest::bool::ANY, chambers_strategy()),
+                1..30,
+            )
+        ) {
+            let params = TankModelParams::default();
+            let mut m = TankModel::new(params);
+            let range = params.negative_stall_pa..=params.positive_stall_pa;
+            for (dt_ms, positive_on, negative_on, chambers) in steps {
+                m.advance(dt_ms, PumpOutputs { positive_on, negative_on }, &chambers);
+                let (p, n) = m.tanks_pa();
+                proptest::prop_assert!(range.contains(&p), "positive tank {}", p);
+                proptest::prop_assert!(range.contains(&n), "negative tank {}", n);
+                for i in 0..CHAMBER_COUNT {
+                    let c = m.chamber_pa(i).unwrap();
+                    proptest::prop_assert!(range.contains(&c), "chamber {} at {}", i, c);
+                }
+            }
+        }
+    }
+
     #[test]
     fn running_pump_raises_its_tank_toward_stall() {
         let mut m = TankModel::new(TankModelParams::default());

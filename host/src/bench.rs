@@ -26,7 +26,7 @@ pub struct Setting {
 
 /// The settings compared in BENCHMARKS.md: the exact reference (paper rule
 /// and relative rule), the fast path at several grid steps, without and with
-/// skipping, and the default (fast, step 4, tracking).
+/// skipping, and with tracking (the default: fast, step 8, tracking).
 pub fn settings() -> Vec<Setting> {
     let make = |mode, step, threshold, centre, skip| {
         let mut p = Params::default();
@@ -70,11 +70,11 @@ pub fn settings() -> Vec<Setting> {
             params: make(F, 8, R, D, true),
         },
         Setting {
-            name: "fast s8, relative, skip+ROI, tracking",
-            params: make(F, 8, R, H, true),
+            name: "fast s4, relative, skip+ROI, tracking",
+            params: make(F, 4, R, H, true),
         },
         Setting {
-            name: "default: fast s4, relative, skip+ROI, tracking",
+            name: "default: fast s8, relative, skip+ROI, tracking",
             params: Params::default(),
         },
     ]
@@ -243,4 +243,237 @@ mod tests {
         assert_eq!(quantile((1..=100).map(f64::from).collect(), 0.95), 95.0);
         assert_eq!(quantile(vec![7.0], 0.95), 7.0);
     }
+}
+
+/// Accuracy and time of one setting pooled over scene groups (one point of
+/// the Pareto plot).
+#[derive(Debug, Clone)]
+pub struct Pooled {
+    /// Setting name.
+    pub name: &'static str,
+    /// Median centre error over nominal, edge and large scenes, px.
+    pub error_median_px: f64,
+    /// 95th percentile centre error over nominal, edge and large, px.
+    pub error_p95_px: f64,
+    /// Contacts found / frames over nominal, edge and large.
+    pub found: (usize, usize),
+    /// Small contacts found / frames.
+    pub small_found: (usize, usize),
+    /// False contacts / no-contact frames.
+    pub false_positives: (usize, usize),
+    /// Median total time over all frames, ms.
+    pub total_median_ms: f64,
+    /// Median total time over contact frames, ms.
+    pub contact_median_ms: f64,
+    /// Median total time over no-contact frames, ms.
+    pub no_contact_median_ms: f64,
+}
+
+/// Pools the samples of one setting (see [`Pooled`]).
+pub fn pool(name: &'static str, samples: &[Sample]) -> Pooled {
+    let target = |s: &&Sample| {
+        matches!(
+            s.category,
+            Category::Nominal | Category::Edge | Category::Large
+        )
+    };
+    let t: Vec<&Sample> = samples.iter().filter(target).collect();
+    let errors: Vec<f64> = t.iter().filter_map(|s| s.error_px).collect();
+    let count = |c: Category| {
+        let v: Vec<&Sample> = samples.iter().filter(|s| s.category == c).collect();
+        (v.iter().filter(|s| s.error_px.is_some()).count(), v.len())
+    };
+    let times = |f: &dyn Fn(&Sample) -> bool| {
+        quantile(
+            samples
+                .iter()
+                .filter(|s| f(s))
+                .map(|s| s.times.total_ms)
+                .collect(),
+            0.5,
+        )
+    };
+    Pooled {
+        name,
+        error_median_px: quantile(errors.clone(), 0.5),
+        error_p95_px: quantile(errors, 0.95),
+        found: (t.iter().filter(|s| s.error_px.is_some()).count(), t.len()),
+        small_found: count(Category::Small),
+        false_positives: count(Category::NoContact),
+        total_median_ms: times(&|_| true),
+        contact_median_ms: times(&|s| s.has_truth),
+        no_contact_median_ms: times(&|s| !s.has_truth),
+    }
+}
+
+/// Markdown Pareto table of pooled settings.
+pub fn pareto_markdown(rows: &[Pooled]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| setting | err median px | err p95 px | found (nom+edge+large) | small found | false + | total ms median | contact frames ms | no-contact frames ms |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        let _ = writeln!(
+            s,
+            "| {} | {:.2} | {:.2} | {}/{} | {}/{} | {}/{} | {:.3} | {:.3} | {:.3} |",
+            r.name,
+            r.error_median_px,
+            r.error_p95_px,
+            r.found.0,
+            r.found.1,
+            r.small_found.0,
+            r.small_found.1,
+            r.false_positives.0,
+            r.false_positives.1,
+            r.total_median_ms,
+            r.contact_median_ms,
+            r.no_contact_median_ms
+        );
+    }
+    s
+}
+
+/// Median stage times of the default pipeline at `width x height` (the
+/// sensor, h and mm/px scaled with the image so the scene is the same), on
+/// nominal-contact and no-contact frames.
+pub fn time_at_size(
+    width: usize,
+    height: usize,
+    frames: usize,
+    seed: u64,
+) -> Result<(StageTimes, StageTimes), CalibrationError> {
+    let scale = width as f64 / 640.0;
+    let mut params = Params::default();
+    params.frame.work_width_px = width as u32;
+    params.frame.work_height_px = height as u32;
+    params.density.kernel_width_px *= scale;
+    params.frame.mm_per_px /= scale;
+    params.contact.move_noise_px *= scale.max(0.5);
+    let setting = Setting {
+        name: "default",
+        params,
+    };
+    let contact = evaluate(&setting, &[Category::Nominal], frames, width, height, seed)?;
+    let idle = evaluate(
+        &setting,
+        &[Category::NoContact],
+        frames,
+        width,
+        height,
+        seed,
+    )?;
+    let med = |v: &[Sample]| {
+        let q = |f: &dyn Fn(&Sample) -> f64| quantile(v.iter().map(f).collect(), 0.5);
+        StageTimes {
+            detect_ms: q(&|s| s.times.detect_ms),
+            kde_ms: q(&|s| s.times.kde_ms),
+            segment_ms: q(&|s| s.times.segment_ms),
+            total_ms: q(&|s| s.times.total_ms),
+        }
+    };
+    Ok((med(&contact), med(&idle)))
+}
+
+/// Renders the Pareto plot: x = median total time (log, 0.1..1000 ms),
+/// y = median centre error on nominal/edge/large (log, 0.01..1000 px); one
+/// filled square per setting in `colours` order, a hollow square at its p95
+/// error; grey grid lines at each decade. Returns an RGB image.
+pub fn pareto_plot(rows: &[Pooled], colours: &[[u8; 3]]) -> image::RgbImage {
+    let (w, h) = (720u32, 540u32);
+    let (left, right, top, bottom) = (60.0, 700.0, 20.0, 500.0);
+    let mut img = image::RgbImage::from_pixel(w, h, image::Rgb([255, 255, 255]));
+    let x_of = |ms: f64| left + (ms.clamp(0.1, 1000.0).log10() + 1.0) / 4.0 * (right - left);
+    let y_of = |px: f64| bottom - (px.clamp(0.01, 1000.0).log10() + 2.0) / 5.0 * (bottom - top);
+    let mut line = |x0: f64, y0: f64, x1: f64, y1: f64, c: [u8; 3]| {
+        let n = ((x1 - x0).abs().max((y1 - y0).abs()) as usize).max(1);
+        for k in 0..=n {
+            let t = k as f64 / n as f64;
+            let (x, y) = (x0 + t * (x1 - x0), y0 + t * (y1 - y0));
+            if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
+                img.put_pixel(x as u32, y as u32, image::Rgb(c));
+            }
+        }
+    };
+    for d in 0..=4 {
+        let x = x_of(10f64.powi(d - 1));
+        line(x, top, x, bottom, [210, 210, 210]);
+    }
+    for d in 0..=5 {
+        let y = y_of(10f64.powi(d - 2));
+        line(left, y, right, y, [210, 210, 210]);
+    }
+    // Targets: 0.5 ms and 1 px.
+    line(x_of(0.5), top, x_of(0.5), bottom, [120, 200, 120]);
+    line(left, y_of(1.0), right, y_of(1.0), [120, 200, 120]);
+    line(left, bottom, right, bottom, [0, 0, 0]);
+    line(left, top, left, bottom, [0, 0, 0]);
+    for (r, c) in rows.iter().zip(colours) {
+        let x = x_of(r.total_median_ms);
+        for (err, filled) in [(r.error_median_px, true), (r.error_p95_px, false)] {
+            if !err.is_finite() || !x.is_finite() {
+                continue;
+            }
+            let y = y_of(err);
+            for dy in -5i32..=5 {
+                for dx in -5i32..=5 {
+                    let edge = dx.abs() == 5 || dy.abs() == 5;
+                    if filled || edge {
+                        let (px, py) = (x as i32 + dx, y as i32 + dy);
+                        if px >= 0 && py >= 0 && (px as u32) < w && (py as u32) < h {
+                            img.put_pixel(px as u32, py as u32, image::Rgb(*c));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    img
+}
+
+/// Difference of the fast density path from the exact f64 reference on the
+/// markers of `frames` nominal frames: for each grid step, the largest and
+/// the mean absolute difference at the fast path's samples, as a fraction of
+/// the interior rest density (90th percentile of the reference values).
+pub fn density_difference(steps: &[u32], frames: usize, seed: u64) -> Vec<(u32, f64, f64)> {
+    let sensor = Category::Nominal.sensor(640, 480, seed);
+    let params = Params::default();
+    let (h, mm) = (params.density.kernel_width_px, params.frame.mm_per_px);
+    let scenes: Vec<Vec<crate::PointPx>> = (0..frames)
+        .map(|k| synth::render(&Category::Nominal.scene(&sensor, seed + k as u64)).markers)
+        .collect();
+    let mut out = Vec::new();
+    for &step in steps {
+        let setup = crate::density::DensitySetup {
+            width: 640,
+            height: 480,
+            h_px: h,
+            mm_per_px: mm,
+            mode: DensityMode::Fast,
+            step_px: step as usize,
+            truncate_sigmas: params.density.truncate_sigmas,
+        };
+        let (mut worst, mut sum, mut n) = (0f64, 0f64, 0usize);
+        for m in &scenes {
+            let fast = crate::density::estimate(m, &setup, None);
+            let g = fast.grid;
+            let mut pairs = Vec::with_capacity(g.nx * g.ny);
+            for j in 0..g.ny {
+                for i in 0..g.nx {
+                    let want = crate::density::exact_at(m, g.point(i as f64, j as f64), h, mm);
+                    pairs.push((fast.at(i, j) as f64, want));
+                }
+            }
+            let typical = quantile(pairs.iter().map(|p| p.1).collect(), 0.9);
+            for (got, want) in pairs {
+                let d = (got - want).abs() / typical;
+                worst = worst.max(d);
+                sum += d;
+                n += 1;
+            }
+        }
+        out.push((step, worst, sum / n.max(1) as f64));
+    }
+    out
 }

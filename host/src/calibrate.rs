@@ -98,6 +98,8 @@ pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, Cal
         });
     }
     let pitch_px = median_spacing(&rest_markers);
+    let mut detector = detector;
+    detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
     let density = DensitySetup {
         width: w,
         height: h,
@@ -119,6 +121,29 @@ pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, Cal
         rest_density,
         mask,
     })
+}
+
+/// The bounding box of the rest markers grown by a pitch, the marker size and
+/// the filter margin (markers cannot move further out than that and still be
+/// on the skin), aligned to even pixels, clipped to the frame.
+fn search_window(
+    rest: &[PointPx],
+    det: &Detector,
+    pitch_px: f64,
+    w: usize,
+    h: usize,
+) -> [usize; 4] {
+    let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    for p in rest {
+        x0 = x0.min(p.x);
+        y0 = y0.min(p.y);
+        x1 = x1.max(p.x);
+        y1 = y1.max(p.y);
+    }
+    let grow = pitch_px + 2.0 * det.radius_px + ((3 * det.lobe_px) / 2 * det.bin) as f64 + 2.0;
+    let lo = |v: f64| ((v - grow).max(0.0) as usize) & !1;
+    let hi = |v: f64, n: usize| (((v + grow).ceil().max(0.0) as usize + 1) & !1).min(n);
+    [lo(x0), lo(y0), hi(x1, w), hi(y1, h)]
 }
 
 /// Median distance from each marker to its nearest neighbour, px

@@ -209,6 +209,21 @@ pub fn exact(
     out
 }
 
+/// The reference density at one point, f64, markers per mm^2: Eq. 1 with the
+/// normalised Gaussian, written out literally (every marker, no
+/// factorisation, no truncation).
+pub fn exact_at(markers: &[PointPx], p: PointPx, h_px: f64, mm_per_px: f64) -> f64 {
+    let norm = 1.0 / (std::f64::consts::TAU * h_px * h_px * mm_per_px * mm_per_px);
+    markers
+        .iter()
+        .filter(|m| m.is_finite())
+        .map(|m| {
+            let r2 = (p.x - m.x).powi(2) + (p.y - m.y).powi(2);
+            norm * (-r2 / (2.0 * h_px * h_px)).exp()
+        })
+        .sum()
+}
+
 /// The fast path: f32, grid, truncated kernel, ROI only.
 fn fast(markers: &[PointPx], grid: Grid, roi: CellRect, setup: &DensitySetup) -> DensityMap {
     let mut values = vec![0f32; grid.nx * grid.ny];
@@ -258,16 +273,8 @@ mod tests {
     use super::*;
     use crate::test_fixtures;
 
-    /// Eq. 1 with the normalised Gaussian, written out literally.
     fn direct(markers: &[PointPx], x: f64, y: f64, h: f64, s: f64) -> f64 {
-        markers
-            .iter()
-            .map(|m| {
-                let r2 = (x - m.x).powi(2) + (y - m.y).powi(2);
-                (-r2 / (2.0 * h * h)).exp() / (std::f64::consts::TAU * h * h)
-            })
-            .sum::<f64>()
-            / (s * s)
+        exact_at(markers, PointPx::new(x, y), h, s)
     }
 
     fn setup(w: usize, h: usize, mode: DensityMode, step: usize) -> DensitySetup {

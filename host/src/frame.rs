@@ -198,15 +198,28 @@ pub fn to_grey(raw: &RawFrame<'_>) -> Result<GreyFrame, FrameError> {
             got: raw.data.len(),
         });
     }
-    let data = if raw.channels == 1 {
-        raw.data.to_vec()
-    } else {
-        raw.data
-            .chunks_exact(raw.channels)
-            .map(|p| ((77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8) as u8)
-            .collect()
+    let data = match raw.channels {
+        1 => raw.data.to_vec(),
+        3 => luma::<3>(raw.data),
+        _ => luma::<4>(raw.data),
     };
     GreyFrame::new(raw.width, raw.height, data)
+}
+
+/// BT.601 luma of interleaved `C`-channel pixels (R, G, B first).
+fn luma<const C: usize>(data: &[u8]) -> Vec<u8> {
+    let mut out = vec![0u8; data.len() / C];
+    for (o, p) in out.iter_mut().zip(data.chunks_exact(C)) {
+        let (r, g, b) = (p[0] as u16, p[1] as u16, p[2] as u16);
+        // 77 + 150 + 29 = 256: the sum fits u16 (255 * 256 = 65280), so the
+        // wrapping ops never wrap; they only drop the overflow checks.
+        let y = r
+            .wrapping_mul(77)
+            .wrapping_add(g.wrapping_mul(150))
+            .wrapping_add(b.wrapping_mul(29));
+        *o = (y >> 8) as u8;
+    }
+    out
 }
 
 /// Crops `rect = [x, y, w, h]` (inside `src`) and rescales to `ow x oh`.

@@ -6,7 +6,7 @@
 //! Eq. 2) -> [`displacement`] (Eq. 3). [`calibrate`] builds the rest
 //! reference, [`tracking`] adds marker tracking beyond the paper, and
 //! [`pipeline`] runs the stages on one frame with per-stage times.
-//! [`synth`] renders seeded synthetic frames with ground truth; [`bench`]
+//! [`synth`] renders seeded synthetic frames with ground truth; [`bench`](mod@bench)
 //! measures accuracy against run time on them.
 #![warn(missing_docs)]
 
@@ -51,3 +51,9 @@ impl PointPx {
         self.x.is_finite() && self.y.is_finite()
     }
 }
+
+// Gripper configurations, actuator model, kinematics and workspace (issue 6).
+pub mod actuator;
+pub mod gripper;
+pub mod kinematics;
+pub mod workspace;

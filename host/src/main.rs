@@ -4,6 +4,7 @@ mod analyze;
 mod bench_cmd;
 mod cli_run;
 mod cli_sim;
+mod cli_kinematics;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -36,6 +37,12 @@ enum Command {
     Sim(cli_sim::SimArgs),
     /// The task loop on the real gripper: serial port, gripper config, frame sources.
     Run(cli_run::RunArgs),
+    /// Workspace of one finger: points CSV, X-Y / X-Z / 3-D views (PNG),
+    /// extents and volume (JSON) in --out.
+    Workspace(cli_kinematics::WorkspaceArgs),
+    /// Fit the linear pressure -> angle actuator model to measured
+    /// `pressure_kpa,angle_deg` rows by least squares.
+    FitActuator(cli_kinematics::FitArgs),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -82,6 +89,12 @@ fn main() -> ExitCode {
         Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
         Some(Command::Sim(args)) => cli_sim::run(&args),
         Some(Command::Run(args)) => cli_run::run(&args),
+        Some(Command::Workspace(args)) => {
+            cli_kinematics::exit("workspace", cli_kinematics::run_workspace(&args))
+        }
+        Some(Command::FitActuator(args)) => {
+            cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
+        }
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",

@@ -54,6 +54,8 @@ pub struct Marker {
     pub pos: PointPx,
     /// Blob strength (sqrt of the determinant of Hessian), grey levels.
     pub strength: f32,
+    /// Grey level at the detection maximum (binned image when binning).
+    pub peak: u8,
 }
 
 /// The markers of one frame.
@@ -87,43 +89,186 @@ pub struct Detector {
     pub lobe_px: usize,
     /// Detect on a 2x2-binned image (`2`) or at full resolution (`1`).
     pub bin: usize,
+    /// Candidate blobs are intensity maxima of the detection image at least
+    /// this bright (grey levels; 0 = any maximum). Set by [`auto_detector`]
+    /// to half the dimmest rest markers' level: the determinant of Hessian
+    /// then runs only at candidates instead of at every pixel.
+    pub min_level: u8,
     /// Minimum blob strength, grey levels.
     pub min_strength: f32,
     /// Minimum contrast over the local background, grey levels.
     pub min_contrast: f32,
     /// Estimated marker radius, working px (sets the centroid window).
     pub radius_px: f64,
+    /// Search only `[x0, y0, x1, y1)` (working px; `None`: the whole frame).
+    /// The calibration sets it to the sensing area plus a margin.
+    pub window_px: Option<[usize; 4]>,
 }
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
-    let binned;
-    let (img, w, h) = if det.bin == 2 && frame.width() >= 2 && frame.height() >= 2 {
-        binned = bin2(frame);
-        (&binned[..], frame.width() / 2, frame.height() / 2)
+    let (fw, fh) = (frame.width(), frame.height());
+    let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
+    let (x1, y1) = (x1.min(fw), y1.min(fh));
+    let (x0, y0) = (x0.min(x1), y0.min(y1));
+    let sub;
+    let (img, w, h, bin) = if det.bin == 2 && x1 - x0 >= 2 && y1 - y0 >= 2 {
+        sub = bin2(frame, x0, y0, (x1 - x0) / 2, (y1 - y0) / 2);
+        (&sub[..], (x1 - x0) / 2, (y1 - y0) / 2, 2)
+    } else if (x0, y0, x1, y1) == (0, 0, fw, fh) {
+        (frame.data(), fw, fh, 1)
     } else {
-        (frame.data(), frame.width(), frame.height())
-    };
-    let bin = if img.len() == frame.data().len() {
-        1
-    } else {
-        2
+        sub = crop(frame, x0, y0, x1 - x0, y1 - y0);
+        (&sub[..], x1 - x0, y1 - y0, 1)
     };
     let lobe = det.lobe_px.max(3) | 1;
-    let det_map = determinant_map(img, w, h, lobe, 1);
-    let mut list = Vec::new();
+    let margin = (3 * lobe - 1) / 2;
+    if w <= 2 * margin + 2 || h <= 2 * margin + 2 {
+        return Markers::default();
+    }
+    let ii = integral(img, w, h);
     let min_det = det.min_strength * det.min_strength;
-    for (x, y, d) in local_maxima(&det_map, w, h, min_det) {
-        let s = d.sqrt();
+    let mut taken = Occupancy::new(frame.width(), frame.height());
+    let mut list = Vec::new();
+    for (x, y, peak) in bright_peaks(img, w, h, margin, det.min_level) {
+        let d = determinant_at(&ii, w + 1, x, y, lobe);
+        if d <= min_det {
+            continue;
+        }
         let guess = PointPx::new(
-            (x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
-            (y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+            (x0 + x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
+            (y0 + y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
         );
         if let Some(pos) = refine(frame, guess, det.radius_px, det.min_contrast) {
-            list.push(Marker { pos, strength: s });
+            if taken.claim(pos, DUPLICATE_PX) {
+                list.push(Marker {
+                    pos,
+                    strength: d.sqrt(),
+                    peak,
+                });
+            }
         }
     }
     Markers { list }
+}
+
+/// Two refined centroids closer than this are one marker, px.
+const DUPLICATE_PX: f64 = 2.0;
+
+/// Coarse occupancy grid for de-duplicating centroids (cells of 4 px).
+struct Occupancy {
+    cols: usize,
+    rows: usize,
+    cells: Vec<Option<PointPx>>,
+}
+
+impl Occupancy {
+    const CELL_PX: f64 = 4.0;
+
+    fn new(width: usize, height: usize) -> Self {
+        let cols = (width as f64 / Self::CELL_PX).ceil() as usize + 1;
+        let rows = (height as f64 / Self::CELL_PX).ceil() as usize + 1;
+        Self {
+            cols,
+            rows,
+            cells: vec![None; cols * rows],
+        }
+    }
+
+    /// Claims `p` unless a claimed point lies within `radius` (<= one cell).
+    fn claim(&mut self, p: PointPx, radius: f64) -> bool {
+        // `as usize` saturates negatives to 0 and truncates (= floor for >= 0).
+        let ci = ((p.x / Self::CELL_PX) as usize).min(self.cols - 1);
+        let cj = ((p.y / Self::CELL_PX) as usize).min(self.rows - 1);
+        for j in cj.saturating_sub(1)..=(cj + 1).min(self.rows - 1) {
+            for i in ci.saturating_sub(1)..=(ci + 1).min(self.cols - 1) {
+                if let Some(q) = self.cells[j * self.cols + i] {
+                    if (q.x - p.x).powi(2) + (q.y - p.y).powi(2) < radius * radius {
+                        return false;
+                    }
+                }
+            }
+        }
+        let cell = &mut self.cells[cj * self.cols + ci];
+        if cell.is_none() {
+            *cell = Some(p);
+        }
+        true
+    }
+}
+
+/// Candidate blob centres: 3x3 intensity maxima (a plateau yields its first
+/// pixel in raster order) at least `min_level` bright, `margin` px inside.
+fn bright_peaks(
+    img: &[u8],
+    w: usize,
+    h: usize,
+    margin: usize,
+    min_level: u8,
+) -> Vec<(usize, usize, u8)> {
+    const CHUNK: usize = 16;
+    let m = margin.max(1);
+    let mut out = Vec::new();
+    for y in m..h - m {
+        let (up, row, down) = (
+            &img[(y - 1) * w..y * w],
+            &img[y * w..(y + 1) * w],
+            &img[(y + 1) * w..(y + 2) * w],
+        );
+        let mut start = m;
+        while start < w - m {
+            let end = (start + CHUNK).min(w - m);
+            // Skip dark runs with one vectorisable max.
+            let brightest = row[start..end].iter().fold(0u8, |a, &v| a.max(v));
+            if brightest >= min_level.max(1) {
+                for x in start..end {
+                    let v = row[x];
+                    if v < min_level || v == 0 {
+                        continue;
+                    }
+                    if v > up[x - 1]
+                        && v > up[x]
+                        && v > up[x + 1]
+                        && v > row[x - 1]
+                        && v >= row[x + 1]
+                        && v >= down[x - 1]
+                        && v >= down[x]
+                        && v >= down[x + 1]
+                    {
+                        out.push((x, y, v));
+                    }
+                }
+            }
+            start = end;
+        }
+    }
+    out
+}
+
+/// Determinant of the box Hessian at one pixel (0 unless a bright blob);
+/// `(x, y)` must be at least `(3 lobe - 1) / 2` px inside the image.
+fn determinant_at(ii: &[u32], s: usize, x: usize, y: usize, lobe: usize) -> f32 {
+    let l = lobe;
+    let half = (l - 1) / 2;
+    let bx = |x0: usize, y0: usize, x1: usize, y1: usize| -> i32 {
+        ii[y1 * s + x1]
+            .wrapping_sub(ii[y0 * s + x1])
+            .wrapping_sub(ii[y1 * s + x0])
+            .wrapping_add(ii[y0 * s + x0]) as i32
+    };
+    let dyy = bx(x + 1 - l, y - half - l, x + l, y + half + l + 1)
+        - 3 * bx(x + 1 - l, y - half, x + l, y + half + 1);
+    let dxx = bx(x - half - l, y + 1 - l, x + half + l + 1, y + l)
+        - 3 * bx(x - half, y + 1 - l, x + half + 1, y + l);
+    let dxy = bx(x - l, y - l, x, y) + bx(x + 1, y + 1, x + l + 1, y + l + 1)
+        - bx(x + 1, y - l, x + l + 1, y)
+        - bx(x - l, y + 1, x, y + l + 1);
+    if dxx >= 0 || dyy >= 0 {
+        return 0.0;
+    }
+    let inv_area = 1.0 / (l * (2 * l - 1)) as f32;
+    let fxy = dxy as f32 * inv_area * DXY_WEIGHT;
+    ((dxx as f32 * inv_area) * (dyy as f32 * inv_area) - fxy * fxy).max(0.0)
 }
 
 /// Finds the marker scale and threshold from a rest (no-contact) frame.
@@ -163,9 +308,11 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
     let mut det = Detector {
         lobe_px,
         bin,
+        min_level: 0,
         min_strength: 1e-3,
         min_contrast: params.min_contrast,
         radius_px: 0.4 * full_lobe as f64 * std::f64::consts::SQRT_2,
+        window_px: None,
     };
     let all = detect(rest, &det);
     let strengths: Vec<f32> = all.list.iter().map(|m| m.strength).collect();
@@ -177,6 +324,13 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
         });
     }
     det.min_strength = params.strength_ratio * percentile(strengths, 0.9);
+    let kept: Vec<f32> = all
+        .list
+        .iter()
+        .filter(|m| m.strength > det.min_strength)
+        .map(|m| m.peak as f32)
+        .collect();
+    det.min_level = (0.5 * percentile(kept, 0.05)) as u8;
     Ok(det)
 }
 
@@ -191,19 +345,36 @@ fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
 }
 
 /// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.
-fn bin2(frame: &GreyFrame) -> Vec<u8> {
-    let (w, h) = (frame.width() / 2, frame.height() / 2);
+/// `w x h` output pixels from the frame region starting at `(x0, y0)`.
+fn bin2(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
     let src = frame.data();
     let fw = frame.width();
     let mut out = Vec::with_capacity(w * h);
     for y in 0..h {
-        let r0 = &src[2 * y * fw..][..2 * w];
-        let r1 = &src[(2 * y + 1) * fw..][..2 * w];
+        let r0 = &src[(y0 + 2 * y) * fw + x0..][..2 * w];
+        let r1 = &src[(y0 + 2 * y + 1) * fw + x0..][..2 * w];
         out.extend(
             r0.chunks_exact(2)
                 .zip(r1.chunks_exact(2))
-                .map(|(a, b)| ((a[0] as u16 + a[1] as u16 + b[0] as u16 + b[1] as u16) >> 2) as u8),
+                // 4 x 255 fits u16: wrapping ops only skip the overflow check.
+                .map(|(a, b)| {
+                    let sum = (a[0] as u16)
+                        .wrapping_add(a[1] as u16)
+                        .wrapping_add(b[0] as u16)
+                        .wrapping_add(b[1] as u16);
+                    (sum >> 2) as u8
+                }),
         );
+    }
+    out
+}
+
+/// Copy of the `w x h` frame region starting at `(x0, y0)`.
+fn crop(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
+    let fw = frame.width();
+    let mut out = Vec::with_capacity(w * h);
+    for y in y0..y0 + h {
+        out.extend_from_slice(&frame.data()[y * fw + x0..y * fw + x0 + w]);
     }
     out
 }
@@ -226,21 +397,21 @@ pub fn integral(img: &[u8], w: usize, h: usize) -> Vec<u32> {
     ii
 }
 
-/// Blob-strength map (see the module doc); evaluated every `step` pixels
-/// (others and the border are 0).
+/// Blob strength (see the module doc) every `step` pixels.
 fn strength_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
     let mut out = determinant_map(img, w, h, lobe, step);
     out.iter_mut().for_each(|v| *v = v.sqrt());
     out
 }
 
-/// Determinant of the box Hessian of bright blobs (0 elsewhere): the square
-/// of the blob strength. Every `step` pixels; the border is 0.
+/// Determinant of the box Hessian of bright blobs (0 elsewhere, i.e. the
+/// square of the blob strength), every `step` pixels inside the border
+/// (sampled row-major, the border left out). Used by the scale search.
 fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
-    let mut out = vec![0f32; w * h];
     let m = (3 * lobe - 1) / 2;
+    let step = step.max(1);
     if w <= 2 * m + 1 || h <= 2 * m + 1 {
-        return out;
+        return Vec::new();
     }
     let ii = integral(img, w, h);
     let s = w + 1;
@@ -248,6 +419,9 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
     let half = (l - 1) / 2;
     let inv_area = 1.0 / (lobe * (2 * lobe - 1)) as f32;
     let n = w - 2 * m;
+    let cols = n.div_ceil(step);
+    let rows = (h - 2 * m).div_ceil(step);
+    let mut values = vec![0f32; cols * rows];
     // Boxes as [x0, y0, x1, y1) offsets from the centre pixel.
     let boxes: [[isize; 4]; 8] = [
         [1 - l, -half - l, l, half + l + 1], // Dyy outer
@@ -259,8 +433,9 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
         [1, -l, l + 1, 0],                   // Dxy top-right
         [-l, 1, 0, l + 1],                   // Dxy bottom-left
     ];
-    let mut sums = vec![vec![0i32; n]; 8];
-    for y in (m..h - m).step_by(step) {
+    let mut sums = vec![vec![0i32; cols]; 8];
+    for (r, out) in values.chunks_exact_mut(cols).enumerate() {
+        let y = m + r * step;
         for (b, sum) in boxes.iter().zip(sums.iter_mut()) {
             // Corner rows, each sliced to the n centre columns of this row.
             let at = |dx: isize, dy: isize| {
@@ -273,12 +448,23 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
                 at(b[0], b[3]),
                 at(b[0], b[1]),
             );
-            for ((((o, &a), &bb), &c), &d) in sum.iter_mut().zip(a).zip(bb).zip(c).zip(d) {
-                *o = a.wrapping_sub(bb).wrapping_sub(c).wrapping_add(d) as i32;
+            if step == 1 {
+                for ((((o, &a), &bb), &c), &d) in sum.iter_mut().zip(a).zip(bb).zip(c).zip(d) {
+                    *o = a.wrapping_sub(bb).wrapping_sub(c).wrapping_add(d) as i32;
+                }
+            } else {
+                let it = a
+                    .iter()
+                    .step_by(step)
+                    .zip(bb.iter().step_by(step))
+                    .zip(c.iter().step_by(step))
+                    .zip(d.iter().step_by(step));
+                for (o, (((&a, &bb), &c), &d)) in sum.iter_mut().zip(it) {
+                    *o = a.wrapping_sub(bb).wrapping_sub(c).wrapping_add(d) as i32;
+                }
             }
         }
-        let row = &mut out[y * w + m..y * w + m + n];
-        for (k, o) in row.iter_mut().enumerate().step_by(step) {
+        for (k, o) in out.iter_mut().enumerate() {
             let dyy = sums[0][k] - 3 * sums[1][k];
             let dxx = sums[2][k] - 3 * sums[3][k];
             let dxy = sums[4][k] + sums[5][k] - sums[6][k] - sums[7][k];
@@ -289,82 +475,68 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
             }
         }
     }
-    out
-}
-
-/// Strict 3x3 local maxima above `min` (ties go to the first in raster order).
-fn local_maxima(map: &[f32], w: usize, h: usize, min: f32) -> Vec<(usize, usize, f32)> {
-    let mut out = Vec::new();
-    for y in 1..h.saturating_sub(1) {
-        let (up, row, down) = (
-            &map[(y - 1) * w..y * w],
-            &map[y * w..(y + 1) * w],
-            &map[(y + 1) * w..(y + 2) * w],
-        );
-        for x in 1..w - 1 {
-            let v = row[x];
-            if v <= min {
-                continue;
-            }
-            if v > up[x - 1]
-                && v > up[x]
-                && v > up[x + 1]
-                && v > row[x - 1]
-                && v >= row[x + 1]
-                && v >= down[x - 1]
-                && v >= down[x]
-                && v >= down[x + 1]
-            {
-                out.push((x, y, v));
-            }
-        }
-    }
-    out
+    values
 }
 
 /// Half-maximum intensity centroid in a window around `guess` (large
-/// enough for the marker when the guess is within 1.5 px). `None` when the
-/// contrast is below `min_contrast` or the window leaves the image.
+/// enough for the marker when the guess is within 1.5 px): the background is
+/// the darkest pixel of the window's outline, the peak the brightest of the
+/// 3x3 around the guess, the weights `max(0, v - (bg + peak) / 2)`. `None`
+/// when the contrast is below `min_contrast` or the centroid runs away.
 fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
-    let rw = (radius_px + 1.5).ceil() as i64 + 1;
-    let (cx, cy) = (guess.x.round() as i64, guess.y.round() as i64);
+    let rw = radius_px.ceil() as i64 + 2;
+    // Guesses are >= 0: adding 0.5 and truncating rounds (no libm call).
+    let (cx, cy) = ((guess.x + 0.5) as i64, (guess.y + 0.5) as i64);
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let (x0, x1) = ((cx - rw).max(0), (cx + rw).min(w - 1));
     let (y0, y1) = ((cy - rw).max(0), (cy + rw).min(h - 1));
-    if x0 > x1 || y0 > y1 {
+    if x0 >= x1 || y0 >= y1 {
         return None;
     }
     let data = frame.data();
     let row = |y: i64| &data[(y * w + x0) as usize..=(y * w + x1) as usize];
-    let (mut lo, mut hi) = (u8::MAX, 0u8);
+    let mut lo = u8::MAX;
+    for y in [y0, y1] {
+        lo = lo.min(row(y).iter().copied().min().unwrap_or(u8::MAX));
+    }
     for y in y0..=y1 {
-        for &v in row(y) {
-            lo = lo.min(v);
-            hi = hi.max(v);
+        let r = row(y);
+        lo = lo.min(r[0]).min(r[r.len() - 1]);
+    }
+    let mut hi = 0u8;
+    for y in (cy - 1).max(y0)..=(cy + 1).min(y1) {
+        for x in (cx - 1).max(x0)..=(cx + 1).min(x1) {
+            hi = hi.max(data[(y * w + x) as usize]);
         }
     }
     let contrast = hi as f32 - lo as f32;
     if contrast < min_contrast.max(1.0) {
         return None;
     }
-    let cut = lo as i32 + ((hi as i32 - lo as i32) >> 1);
-    let (mut sw, mut sx, mut sy) = (0i64, 0i64, 0i64);
+    // lo + (hi - lo) / 2 <= 255.
+    let cut = lo + ((hi - lo) >> 1);
+    // Wrapping arithmetic lets the loop vectorise with overflow checks on
+    // (release profile); it cannot wrap: a window has at most 63 x 63
+    // pixels of weight <= 255 and index <= 62, so every sum < 2^26.
+    let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
     for y in y0..=y1 {
-        let mut rw_sum = 0i64;
-        let mut rx_sum = 0i64;
+        let (mut rw_sum, mut rx_sum) = (0u32, 0u32);
         for (k, &v) in row(y).iter().enumerate() {
-            let wgt = (v as i32 - cut).max(0) as i64;
-            rw_sum += wgt;
-            rx_sum += wgt * k as i64;
+            let wgt = v.saturating_sub(cut) as u32;
+            rw_sum = rw_sum.wrapping_add(wgt);
+            rx_sum = rx_sum.wrapping_add(wgt.wrapping_mul(k as u32));
         }
-        sw += rw_sum;
-        sx += rx_sum;
-        sy += rw_sum * y;
+        sw = sw.wrapping_add(rw_sum);
+        sx = sx.wrapping_add(rx_sum);
+        sy = sy.wrapping_add(rw_sum.wrapping_mul((y - y0) as u32));
     }
-    if sw <= 0 {
+    if sw == 0 {
         return None;
     }
-    let c = PointPx::new(x0 as f64 + sx as f64 / sw as f64, sy as f64 / sw as f64);
+    let c = PointPx::new(
+        x0 as f64 + sx as f64 / sw as f64,
+        y0 as f64 + sy as f64 / sw as f64,
+    );
     ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64).then_some(c)
 }
 
@@ -444,9 +616,11 @@ mod tests {
             let det = Detector {
                 lobe_px: 3,
                 bin: 1,
+                min_level: 0,
                 min_strength: 1.0,
                 min_contrast: 6.0,
                 radius_px: 3.0,
+                window_px: None,
             };
             assert!(detect(&frame, &det).is_empty());
             assert!(matches!(

@@ -62,8 +62,11 @@ pub struct FrameResult {
     pub field: Field,
     /// The contact, if any (working px).
     pub contact: Option<Contact>,
-    /// True when the density stages were skipped (nothing moved).
+    /// True when the density stages were skipped (nothing moved, or blank).
     pub skipped: bool,
+    /// Fewer than half the rest markers were found (blank, covered or
+    /// non-tactile frame): reported as no contact.
+    pub blank: bool,
     /// Density grid cells computed.
     pub density_cells: usize,
     /// Stage times.
@@ -112,7 +115,10 @@ impl Pipeline {
             0.5 * cal.pitch_px,
             cp.move_noise_px,
         );
-        let skipped = cp.skip_unmoved && field.moved.len() < cp.min_moved_markers;
+        // A frame with under half the rest markers is blank, covered or not
+        // a tactile image: no contact rather than a guess.
+        let blank = 2 * markers.len() < cal.rest_markers.len();
+        let skipped = blank || (cp.skip_unmoved && field.moved.len() < cp.min_moved_markers);
         let mut density_cells = 0;
         let mut region = None;
         let mut t2 = Instant::now();
@@ -151,6 +157,7 @@ impl Pipeline {
             field,
             contact,
             skipped,
+            blank,
             density_cells,
             times: StageTimes {
                 detect_ms: ms(t0, t1),
@@ -272,6 +279,34 @@ mod tests {
                 r.field.moved
             );
         }
+    }
+
+    #[test]
+    fn absolute_threshold_trips_on_the_rim_relative_does_not() {
+        // Why the relative rule is the default (SPEC section 3): with every
+        // frame going through the density (no skip), the paper's absolute
+        // T = 0.3 /mm^2 finds the density fall-off at the rim on a frame
+        // without contact; 0.75 x rest does not.
+        let cat = Category::NoContact;
+        let mut params = Params::default();
+        params.contact.skip_unmoved = false;
+        params.contact.centre = crate::params::CentreMethod::Density;
+        let sensor = cat.sensor(640, 480, 5);
+        let frame = synth::render(&cat.scene(&sensor, 300));
+        let relative = test_fixtures::calibrated(cat, 640, 480, &params);
+        let r = Pipeline::new(relative, params.clone())
+            .run(&frame.image)
+            .unwrap();
+        assert!(r.contact.is_none(), "{:?}", r.contact);
+        params.contact.threshold = crate::params::ThresholdMode::Absolute;
+        let absolute = test_fixtures::calibrated(cat, 640, 480, &params);
+        let c = Pipeline::new(absolute, params)
+            .run(&frame.image)
+            .unwrap()
+            .contact;
+        let c = c.expect("absolute rule finds the rim");
+        let from_centre = (c.centre.x - sensor.centre.x).hypot(c.centre.y - sensor.centre.y);
+        assert!(from_centre > 150.0, "{c:?}");
     }
 
     #[test]

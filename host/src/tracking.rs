@@ -39,8 +39,9 @@ impl PointIndex {
             if !p.is_finite() {
                 return None;
             }
-            let i = ((p.x / cell_px).floor().max(0.0) as usize).min(nx - 1);
-            let j = ((p.y / cell_px).floor().max(0.0) as usize).min(ny - 1);
+            // `as usize` saturates negatives to 0 and truncates (= floor for >= 0).
+            let i = ((p.x / cell_px) as usize).min(nx - 1);
+            let j = ((p.y / cell_px) as usize).min(ny - 1);
             Some(j * nx + i)
         };
         for c in points.iter().filter_map(cell_of) {
@@ -72,22 +73,25 @@ impl PointIndex {
         if !q.is_finite() {
             return None;
         }
-        let ci = (q.x / self.cell_px).floor() as i64;
-        let cj = (q.y / self.cell_px).floor() as i64;
+        // Truncation toward zero differs from floor only in (-1, 0), where
+        // the 3x3 search still covers the right cells.
+        let ci = (q.x / self.cell_px) as i64;
+        let cj = (q.y / self.cell_px) as i64;
+        let r2 = radius_px * radius_px;
         let mut best: Option<(usize, f64)> = None;
         for j in (cj - 1).max(0)..=(cj + 1).min(self.ny as i64 - 1) {
             for i in (ci - 1).max(0)..=(ci + 1).min(self.nx as i64 - 1) {
                 let c = j as usize * self.nx + i as usize;
                 for &n in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
                     let p = points[n as usize];
-                    let d = (p.x - q.x).hypot(p.y - q.y);
-                    if d <= radius_px && best.is_none_or(|(_, bd)| d < bd) {
-                        best = Some((n as usize, d));
+                    let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
+                    if d2 <= r2 && best.is_none_or(|(_, bd)| d2 < bd) {
+                        best = Some((n as usize, d2));
                     }
                 }
             }
         }
-        best
+        best.map(|(n, d2)| (n, d2.sqrt()))
     }
 }
 

@@ -66,7 +66,7 @@ pub use limits::{CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
 pub use message::{
     ArmState, Chambers, Fault, FaultEvent, FaultFlags, FirmwareVersion, HelloReply, HostMsg,
     LimitError, McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets, Telemetry,
-    ValveState,
+    ValveState, NO_READING_PA,
 };
 
 /// Version of this wire protocol. Bump it when any message's layout changes;

@@ -358,15 +358,21 @@ impl FaultFlags {
     }
 }
 
+/// The pressure reported for a tank whose sensor gives no valid reading
+/// (out of range, no sample): far outside any real gauge pressure.
+pub const NO_READING_PA: i32 = i32::MIN;
+
 /// Periodic state report from the MCU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Telemetry {
     /// MCU time since reset, in milliseconds (wraps after ~49 days).
     pub time_ms: u32,
-    /// Positive tank pressure, gauge, in pascal.
+    /// Positive tank pressure, gauge, in pascal; [`NO_READING_PA`] when the
+    /// sensor gives no valid reading.
     pub positive_tank_pa: i32,
-    /// Negative tank pressure, gauge, in pascal.
+    /// Negative tank pressure, gauge, in pascal; [`NO_READING_PA`] when the
+    /// sensor gives no valid reading.
     pub negative_tank_pa: i32,
     /// The valve state of every chamber.
     pub chambers: Chambers,
@@ -390,9 +396,9 @@ pub struct FaultEvent {
     pub time_ms: u32,
     /// What tripped.
     pub fault: Fault,
-    /// Positive tank pressure at the trip, in pascal.
+    /// Positive tank pressure at the trip, in pascal ([`NO_READING_PA`] if none).
     pub positive_tank_pa: i32,
-    /// Negative tank pressure at the trip, in pascal.
+    /// Negative tank pressure at the trip, in pascal ([`NO_READING_PA`] if none).
     pub negative_tank_pa: i32,
 }
 

@@ -95,6 +95,8 @@ fn build_firmware() -> PathBuf {
             "--release",
             "--features",
             "qemu",
+            // The outer cargo has already brought Cargo.lock up to date.
+            "--locked",
             "--target-dir",
         ])
         .arg(&target_dir)

@@ -43,8 +43,9 @@ fn apply(ctl: &mut Controller, msg: HostMsg, now_ms: u32) -> Result<Reply, NackR
         HostMsg::Ping { .. } | HostMsg::Heartbeat => {}
         HostMsg::SetTelemetryInterval { interval_ms } => {
             ctl.telemetry_interval_ms = interval_ms;
-            // The first report goes out at the next tick.
-            ctl.last_telemetry_ms = now_ms.wrapping_sub(u32::from(interval_ms));
+            // The first report goes out at the next tick and starts the
+            // cadence there (a gap of two intervals restarts it).
+            ctl.last_telemetry_ms = now_ms.wrapping_sub(2 * u32::from(interval_ms));
         }
         HostMsg::SetTankTargets(targets) => ctl.targets = targets,
         HostMsg::SealAll => ctl.chambers = SAFE_CHAMBERS,

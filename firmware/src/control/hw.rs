@@ -11,7 +11,6 @@ use super::PumpOutputs;
 
 /// Why a pressure sensor gave no usable reading.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[cfg_attr(target_os = "none", derive(defmt::Format))]
 pub enum SensorError {
     /// The raw signal lies outside the sensor's output band (open or shorted
     /// wire, dead sensor).

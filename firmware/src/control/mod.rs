@@ -455,14 +455,14 @@ impl Controller {
         }
     }
 
-    /// The last reading of `tank`, or `i32::MIN` when the sensor gave none
+    /// The last reading of `tank`, or [`dexitac_protocol::NO_READING_PA`] when the sensor gave none
     /// (the sensor fault flag says why).
     fn reported_pa(&self, tank: Tank) -> i32 {
         let reading = match tank {
             Tank::Positive => self.last_readings.positive_pa,
             Tank::Negative => self.last_readings.negative_pa,
         };
-        reading.unwrap_or(i32::MIN)
+        reading.unwrap_or(dexitac_protocol::NO_READING_PA)
     }
 }
 

@@ -1,6 +1,6 @@
 //! Trip conditions: one tank's reading -> the faults it shows.
 //!
-//! Input: a [`TankReadings`] half (pascal or a [`SensorError`]) and the pump
+//! Input: a [`TankReadings`](super::hw::TankReadings) half (pascal or a [`SensorError`]) and the pump
 //! monitor's findings. Output: [`FaultFlags`]. The hard limits come from the
 //! protocol crate at compile time; no command can move them.
 

@@ -120,8 +120,12 @@ struct Bench {
 
 impl Bench {
     fn new(rig: Rig) -> Bench {
+        Bench::with_config(rig, Config::default())
+    }
+
+    fn with_config(rig: Rig, config: Config) -> Bench {
         Bench {
-            ctl: Controller::new(Config::default(), ResetCause::PowerOn),
+            ctl: Controller::new(config, ResetCause::PowerOn),
             rig,
             tx: ByteQueue::new(),
             host_rx: Decoder::new(),
@@ -338,7 +342,10 @@ fn sensor_error_trips_with_sensor_fault() {
     b.tick();
     assert_eq!(b.ctl.state(), ArmState::Tripped);
     assert!(b.ctl.faults().contains(Fault::NegativeSensor));
-    assert_eq!(b.ctl.telemetry(0).negative_tank_pa, i32::MIN);
+    assert_eq!(
+        b.ctl.telemetry(0).negative_tank_pa,
+        dexitac_protocol::NO_READING_PA
+    );
 }
 
 #[test]
@@ -444,6 +451,26 @@ fn telemetry_arrives_at_the_requested_interval() {
     assert_eq!((t.positive_tank_pa, t.negative_tank_pa), (1_000, -2_000));
     b.send(HostMsg::SetTelemetryInterval { interval_ms: 0 });
     assert!(b.ticks(100).is_empty());
+}
+
+#[test]
+fn telemetry_keeps_its_cadence_after_a_late_tick() {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.send(HostMsg::SetTelemetryInterval { interval_ms: 10 });
+    let start = b.rig.now_ms;
+    // Reports at 1 and 11 ms; the tick due at 21 ms comes at 23 ms.
+    b.ticks(20);
+    b.rig.now_ms += 2;
+    let mut sent = b.tick();
+    sent.extend(b.ticks(20));
+    let times: Vec<u32> = sent
+        .iter()
+        .filter_map(|m| match m {
+            McuMsg::Telemetry(t) => Some(t.time_ms - start),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(times, [23, 31, 41]);
 }
 
 #[test]
@@ -655,8 +682,8 @@ impl Observer {
     }
 }
 
-fn run_scenario(events: &[Event]) -> Result<Bench, TestCaseError> {
-    let mut b = Bench::new(Rig::model());
+fn run_scenario(events: &[Event], config: Config) -> Result<Bench, TestCaseError> {
+    let mut b = Bench::with_config(Rig::model(), config);
     let mut obs = Observer {
         last_state: ArmState::Disarmed,
         disarm_seen: false,
@@ -713,7 +740,7 @@ proptest! {
     fn safety_invariants_hold_for_any_commands_and_pressures(
         events in proptest::collection::vec(event(), 1..60)
     ) {
-        run_scenario(&events)?;
+        run_scenario(&events, Config::default())?;
     }
 
     /// Whatever happened before, a silent host finds the controller out of
@@ -722,8 +749,10 @@ proptest! {
     fn host_silence_always_ends_in_the_safe_state_by_the_deadline(
         events in proptest::collection::vec(event(), 0..40),
         arm_last in any::<bool>(),
+        host_silence_ms in 1u32..2_000,
     ) {
-        let mut b = run_scenario(&events)?;
+        let config = Config { host_silence_ms, ..Config::default() };
+        let mut b = run_scenario(&events, config)?;
         if arm_last {
             b.send(HostMsg::Arm);
         }
