@@ -2,9 +2,9 @@
 
 mod analyze;
 mod bench_cmd;
+mod cli_kinematics;
 mod cli_run;
 mod cli_sim;
-mod cli_kinematics;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
