@@ -47,8 +47,12 @@ fn main() {
     let rest = [renderer.render(None), renderer.render(None)];
     let cal = calibrate::calibrate(&rest, &params).expect("calibration");
     let pipeline = Pipeline::new(cal, params);
-    let frames_a: Vec<_> = (0..8).map(|_| renderer.render(Some(&contact(0.0)))).collect();
-    let frames_b: Vec<_> = (0..8).map(|_| renderer.render(Some(&contact(1.0)))).collect();
+    let frames_a: Vec<_> = (0..8)
+        .map(|_| renderer.render(Some(&contact(0.0))))
+        .collect();
+    let frames_b: Vec<_> = (0..8)
+        .map(|_| renderer.render(Some(&contact(1.0))))
+        .collect();
     let a_mm = pipeline
         .run(&frames_a[0])
         .ok()
