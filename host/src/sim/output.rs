@@ -408,7 +408,10 @@ fn glyph(c: char) -> [u8; 5] {
         '/' => [1, 1, 2, 4, 4],
         '(' => [2, 4, 4, 4, 2],
         ')' => [2, 1, 1, 1, 2],
+        ',' => [0, 0, 0, 2, 4],
+        ':' => [0, 2, 0, 2, 0],
         'A' => [2, 5, 7, 5, 5],
+        'B' => [6, 5, 6, 5, 6],
         'C' => [7, 4, 4, 4, 7],
         'D' => [6, 5, 5, 5, 6],
         'E' => [7, 4, 6, 4, 7],
@@ -505,7 +508,8 @@ pub fn plot(r: &SimReport) -> RgbImage {
     let panels = [
         panel(0, 0.0, max_force * 1.1),
         panel(1, 0.0, 6.0),
-        panel(2, 0.0, r.grasp_chambers.len().max(1) as f64),
+        // Headroom above the top lane for the label.
+        panel(2, 0.0, r.grasp_chambers.len().max(1) as f64 + 0.6),
         panel(3, -60.0, 60.0),
     ];
     for p in &panels {
