@@ -3,6 +3,7 @@
 
 use std::io::Write;
 use std::process::{Command, Stdio};
+use std::sync::{Mutex, MutexGuard};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -10,6 +11,14 @@ use dexitac::sim::mcu::{SimMcu, SimMcuConfig};
 use dexitac::sim::rig::{run_scenario, Outcome, SimOptions};
 use dexitac::sim::scenario::Scenario;
 use dexitac_protocol::{ArmState, Fault, HostMsg, ValveState, CHAMBER_COUNT};
+
+/// One test at a time: they share two cores, and the first two run the
+/// board in real time with the firmware's own deadline.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 /// The firmware's host-silence deadline (its default), ms.
 const DEADLINE_MS: u64 = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS as u64;
@@ -25,9 +34,10 @@ impl Drop for Child {
     }
 }
 
-#[test]
-fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
-    // The real-time simulated board, the firmware's default deadline.
+/// Starts `dexitac run --render` on a real-time simulated board with the
+/// firmware's defaults and waits until it armed the board and is closing
+/// the fingers.
+fn host_driving_a_board() -> (SimMcu, Child, tempfile::TempDir) {
     let mcu = SimMcu::spawn(SimMcuConfig::default()).expect("simulated MCU");
     let dir = tempfile::tempdir().expect("tempdir");
     let config = dir.path().join("gripper.toml");
@@ -63,6 +73,13 @@ fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
         );
         thread::sleep(Duration::from_millis(5));
     }
+    (mcu, child, dir)
+}
+
+#[test]
+fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
+    let _serial = serial();
+    let (mcu, mut child, _dir) = host_driving_a_board();
     let killed_at_ms = mcu.snapshot().time_ms;
     child.0.kill().expect("kill");
     let _ = child.0.wait();
@@ -90,7 +107,33 @@ fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
 }
 
 #[test]
+fn ctrl_c_leaves_the_gripper_sealed_and_disarmed() {
+    let _serial = serial();
+    let (mcu, mut child, _dir) = host_driving_a_board();
+    // SIGINT, as Ctrl-C sends it.
+    let pid = i32::try_from(child.0.id()).expect("pid");
+    // SAFETY: kill only sends a signal to our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
+    let until = Instant::now() + Duration::from_secs(10);
+    let status = loop {
+        if let Some(status) = child.0.try_wait().expect("wait") {
+            break status;
+        }
+        assert!(Instant::now() < until, "dexitac run ignored Ctrl-C");
+        thread::sleep(Duration::from_millis(5));
+    };
+    assert!(status.success(), "{status:?}");
+    let s = mcu.snapshot();
+    // Disarmed by the host (not tripped by its silence), valves sealed, pumps off.
+    assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
+    assert!(s.faults.is_empty(), "{s:?}");
+    assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
+    assert!(!s.pumps.positive_on && !s.pumps.negative_on);
+}
+
+#[test]
 fn line_corruption_never_causes_a_wrong_valve_action() {
+    let _serial = serial();
     let scenario = Scenario::load("disturbance").expect("preset");
     let options = SimOptions {
         speed: if cfg!(debug_assertions) { 1.5 } else { 3.0 },
