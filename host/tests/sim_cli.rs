@@ -84,3 +84,66 @@ fn list_shows_the_presets() {
         assert!(out.contains(name), "{out}");
     }
 }
+
+#[test]
+fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
+    use dexitac::sim::mcu::{SimMcu, SimMcuConfig};
+    use dexitac::synth::{self, Press, Scene, SensorSpec};
+    use dexitac::PointPx;
+    use dexitac_protocol::{ArmState, ValveState, CHAMBER_COUNT};
+
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = SensorSpec::nominal(640, 480);
+    let mut dirs = Vec::new();
+    for finger in 0..2 {
+        let d = dir.path().join(format!("sensor{finger}"));
+        std::fs::create_dir(&d).unwrap();
+        for i in 0..8u64 {
+            let presses = if i == 0 {
+                vec![] // the rest frame comes first
+            } else {
+                vec![Press {
+                    centre: PointPx::new(320.0, 240.0),
+                    width_px: 25.0,
+                    strength: 0.6,
+                    shear_px: PointPx::new(0.0, 0.0),
+                }]
+            };
+            let f = synth::render(&Scene {
+                sensor: sensor.clone(),
+                presses,
+                dropout: 0.0,
+                seed: i,
+            });
+            let img = image::GrayImage::from_raw(640, 480, f.image.data().to_vec()).unwrap();
+            img.save(d.join(format!("f{i:03}.png"))).unwrap();
+        }
+        dirs.push(d);
+    }
+    let config = dir.path().join("gripper.toml");
+    std::fs::write(&config, "tank_positive_kpa = 30.0\n").unwrap();
+    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
+    let port = mcu.port_path().to_str().unwrap().to_string();
+    let o = dexitac(&[
+        "run",
+        "--port",
+        &port,
+        "--config",
+        config.to_str().unwrap(),
+        "--frames",
+        dirs[0].to_str().unwrap(),
+        "--frames",
+        dirs[1].to_str().unwrap(),
+        "--fps",
+        "20",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("stopped: Ok(FramesEnded)"),
+        "{}",
+        stderr(&o)
+    );
+    let s = mcu.snapshot();
+    assert_eq!(s.state, ArmState::Disarmed);
+    assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
+}
