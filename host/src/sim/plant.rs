@@ -546,6 +546,7 @@ fn finger_pressure_kpa(chambers_kpa: &[f64; CHAMBER_COUNT], grasp: &[usize], f: 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
 
     const GRASP: [usize; 4] = [0, 1, 4, 5];
 
@@ -621,6 +622,92 @@ mod tests {
         assert_eq!(poke.force_n(0.99), 0.0);
         assert!((poke.force_n(1.25) - 3.0).abs() < 1e-9);
         assert_eq!(poke.force_n(1.5), 0.0);
+    }
+
+    fn valve() -> impl Strategy<Value = ValveState> {
+        prop_oneof![
+            Just(ValveState::Hold),
+            Just(ValveState::Inflate),
+            Just(ValveState::Deflate)
+        ]
+    }
+
+    fn poke() -> impl Strategy<Value = Poke> {
+        (
+            0..3usize,
+            0..2usize,
+            0.0..8.0f64,
+            0.05..3.0f64,
+            0.0..20.0f64,
+            any::<bool>(),
+        )
+            .prop_map(|(target, finger, at_s, duration_s, peak_n, ramp)| Poke {
+                target: [
+                    PokeTarget::Object,
+                    PokeTarget::Actuator,
+                    PokeTarget::FingertipBack,
+                ][target],
+                finger,
+                at_s,
+                duration_s,
+                peak_n,
+                shape: if ramp {
+                    PokeShape::RampHold
+                } else {
+                    PokeShape::HalfSine
+                },
+            })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+
+        /// Any valve sequence, step size and pokes: pressures stay between
+        /// the tanks' (and atmosphere), every output is finite, the slide
+        /// only grows and a dropped object stays dropped.
+        #[test]
+        fn the_plant_stays_bounded_and_finite(
+            steps in proptest::collection::vec(
+                (proptest::array::uniform8(valve()), 1u32..=10, 0..200u32), 1..40),
+            pokes in proptest::collection::vec(poke(), 0..4),
+            lift_at_s in proptest::option::of(0.0..5.0f64),
+        ) {
+            let trajectory = Trajectory { lift_at_s, ..Trajectory::default() };
+            let mut plant = Plant::new(
+                PlantParams::default(),
+                Some(ObjectParams::default()),
+                &GRASP,
+                trajectory,
+                pokes,
+            );
+            let (pos_pa, neg_pa) = (45_000, -50_000);
+            let mut t = 0;
+            let mut slide = 0.0;
+            let mut dropped = false;
+            for (valves, dt_ms, repeat) in steps {
+                for _ in 0..repeat {
+                    t += u64::from(dt_ms);
+                    plant.step(t, dt_ms, (pos_pa, neg_pa), &valves);
+                    let s = plant.state();
+                    for p in s.chambers_kpa {
+                        prop_assert!(p.is_finite() && (-50.0 - 1e-9..=45.0 + 1e-9).contains(&p), "{p}");
+                    }
+                    prop_assert!(s.slide_mm.is_finite() && s.slide_mm >= slide);
+                    slide = s.slide_mm;
+                    prop_assert!(s.capacity_n.is_finite() && s.capacity_n >= 0.0);
+                    prop_assert!(s.load_n.is_finite() && s.load_n >= 0.0);
+                    for c in s.contacts.iter().flatten() {
+                        prop_assert!(c.centre_mm.iter().all(|v| v.is_finite()));
+                        prop_assert!(c.normal_n > 0.0 && c.normal_n.is_finite());
+                    }
+                    if dropped {
+                        prop_assert_eq!(s.object, ObjectState::Dropped);
+                        prop_assert!(s.contacts.iter().all(Option::is_none));
+                    }
+                    dropped = s.object == ObjectState::Dropped;
+                }
+            }
+        }
     }
 
     #[test]
