@@ -7,7 +7,9 @@
 //! - [`render`] draws each fingertip's marker frame from the plant's contact.
 //! - [`scenario`] loads the scenarios (TOML, with embedded presets).
 //! - [`rig`] wires them to the host's task loop ([`crate::runtime`]) and
-//!   records what happened ([`rig::SimReport`]).
+//!   records what happened ([`rig::SimReport`]); [`output`] writes it to
+//!   files (`dexitac sim --out DIR`).
+//! - [`line`] makes the serial line noisy (corruption tests).
 
 pub mod line;
 pub mod mcu;
