@@ -319,7 +319,6 @@ fn run(
             }
             Err(e) => return Err(e),
         };
-        controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
         let now_ms = clock.now_ms();
         if now_ms > world_ms + MAX_LAG_MS {
             // Stalled for longer than the lag bound: skip the lost time
@@ -328,10 +327,25 @@ fn run(
             world_ms += skipped;
             hw.now_ms += skipped;
         }
+        // After any skip: bytes that arrived while this thread was stalled
+        // are stamped with the time it resumed, so its own stall never looks
+        // like host silence.
+        controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
         // A bounded batch, then back to the port: bytes that arrived during
         // a stall are read before the ticks they preceded run out.
-        let due_ms = now_ms.min(world_ms + MAX_BATCH_TICKS * tick_ms);
-        let mut plant = plant.as_ref().map(|p| lock_plant(p));
+        let mut due_ms = now_ms.min(world_ms + MAX_BATCH_TICKS * tick_ms);
+        // Never wait for the plant's readers (low-priority camera threads
+        // could hold the lock while preempted): if it is busy, these ticks
+        // run on the next pass, a millisecond later.
+        let mut plant = match plant.as_ref().map(|p| p.try_lock()) {
+            None => None,
+            Some(Ok(guard)) => Some(guard),
+            Some(Err(std::sync::TryLockError::Poisoned(p))) => Some(p.into_inner()),
+            Some(Err(std::sync::TryLockError::WouldBlock)) => {
+                due_ms = world_ms;
+                None
+            }
+        };
         while world_ms + tick_ms <= due_ms {
             world_ms += tick_ms;
             hw.now_ms += tick_ms;
