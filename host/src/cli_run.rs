@@ -336,8 +336,16 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
                 } => {
                     eprintln!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
                 }
-                RuntimeEvent::Stopped { t_ms, outcome } => {
-                    eprintln!("{:9.3} s  stopped: {outcome:?}", t_ms as f64 / 1e3);
+                RuntimeEvent::Stopped {
+                    t_ms,
+                    outcome,
+                    max_loop_gap,
+                } => {
+                    eprintln!(
+                        "{:9.3} s  stopped: {outcome:?} (longest loop stall {:.1} ms)",
+                        t_ms as f64 / 1e3,
+                        max_loop_gap.as_secs_f64() * 1e3
+                    );
                 }
                 _ => {}
             }

@@ -285,6 +285,10 @@ pub enum RuntimeEvent {
     Stopped {
         /// When.
         t_ms: u64,
+        /// The longest wall-clock gap between two passes of the link
+        /// thread's loop (a stalled loop sends no heartbeat: the firmware
+        /// trips after its host-silence deadline).
+        max_loop_gap: Duration,
         /// How: `Ok` or the error's text.
         outcome: Result<StopReason, String>,
     },
@@ -393,6 +397,7 @@ struct Control<'a, P> {
     grasp: Grasp,
     stage: Stage,
     positive_tank_pa: Option<i32>,
+    max_loop_gap: Duration,
 }
 
 impl<P: Port> Control<'_, P> {
@@ -608,7 +613,10 @@ impl<P: Port> Control<'_, P> {
         let mut live = SENSOR_COUNT;
         // Wake often enough to keep the heartbeat well inside its period.
         let wait = Duration::from_millis((self.link.config().heartbeat_ms / 4).clamp(1, 10));
+        let mut last_pass = Instant::now();
         loop {
+            self.max_loop_gap = self.max_loop_gap.max(last_pass.elapsed());
+            last_pass = Instant::now();
             if stop.load(Ordering::Relaxed) {
                 return Ok(StopReason::Requested);
             }
@@ -673,6 +681,7 @@ pub fn run<P: Port>(
         grasp: Grasp::new(config.grasp),
         stage: Stage::Charging { since_ms: 0 },
         positive_tank_pa: None,
+        max_loop_gap: Duration::ZERO,
     };
     let result = std::thread::scope(|scope| {
         for (i, sensor) in sensors.into_iter().enumerate() {
@@ -693,6 +702,7 @@ pub fn run<P: Port>(
     };
     let _ = events.send(RuntimeEvent::Stopped {
         t_ms: clock.now_ms(),
+        max_loop_gap: control.max_loop_gap,
         outcome: result.as_ref().map(|r| *r).map_err(|e| e.to_string()),
     });
     result

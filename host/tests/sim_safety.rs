@@ -138,11 +138,16 @@ fn line_corruption_never_causes_a_wrong_valve_action() {
     let options = SimOptions {
         speed: if cfg!(debug_assertions) { 1.5 } else { 3.0 },
         line_error_rate: 1e-3,
-        stall_tolerance_ms: 3_000,
+        stall_tolerance_ms: 10_000,
         ..SimOptions::default()
     };
     let r = run_scenario(&scenario, &options).expect("simulated rig");
-    assert!(r.loop_result.is_ok(), "{:?}", r.loop_result);
+    assert!(
+        r.loop_result.is_ok(),
+        "{:?} (longest host loop stall {:?})",
+        r.loop_result,
+        r.max_loop_gap
+    );
     // The line really was noisy: corrupted frames were dropped on both ends.
     assert!(r.link_stats.frame_errors > 0, "{:?}", r.link_stats);
     // Every valve state the MCU drove was one the host had commanded, at

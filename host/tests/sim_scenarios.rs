@@ -26,14 +26,20 @@ fn run(name: &str, tactile: bool) -> SimReport {
     let options = SimOptions {
         tactile_feedback: tactile,
         speed: SPEED,
-        // Unoptimised test builds on a shared two-core machine stall the
-        // loop for a few hundred ms at times; the trip itself is tested in
+        // Unoptimised test builds on a shared two-core machine: other
+        // people's jobs have stalled this process for seconds at times. The
+        // grasp logic is under test here; the trip itself is tested in
         // sim_safety.rs at the firmware's deadline.
-        stall_tolerance_ms: 3_000,
+        stall_tolerance_ms: 10_000,
         ..SimOptions::default()
     };
     let report = run_scenario(&scenario, &options).expect("simulated rig");
-    assert!(report.loop_result.is_ok(), "{:?}", report.loop_result);
+    assert!(
+        report.loop_result.is_ok(),
+        "{:?} (longest host loop stall {:?})",
+        report.loop_result,
+        report.max_loop_gap
+    );
     // Whatever happened, the run ends sealed and disarmed.
     assert_eq!(report.mcu_at_end.state, ArmState::Disarmed);
     assert_eq!(

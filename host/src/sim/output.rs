@@ -285,7 +285,7 @@ pub fn summary_json(r: &SimReport) -> String {
         Err(e) => format!("error: {e}"),
     };
     format!(
-        "{{\n  \"scenario\": {},\n  \"tactile_feedback\": {},\n  \"outcome\": {},\n  \"time_to_stable_s\": {},\n  \"disturbances\": [\n{}\n  ],\n  \"dropped_at_s\": {},\n  \"frame_to_command_ms\": {{\"count\": {}, \"median\": {}, \"p99\": {}}},\n  \"frames\": {},\n  \"loop_result\": {},\n  \"mcu_state_at_end\": {},\n  \"sim_s\": {:.3},\n  \"wall_s\": {:.3}\n}}\n",
+        "{{\n  \"scenario\": {},\n  \"tactile_feedback\": {},\n  \"outcome\": {},\n  \"time_to_stable_s\": {},\n  \"disturbances\": [\n{}\n  ],\n  \"dropped_at_s\": {},\n  \"frame_to_command_ms\": {{\"count\": {}, \"median\": {}, \"p99\": {}}},\n  \"frames\": {},\n  \"host_max_loop_gap_ms\": {:.1},\n  \"loop_result\": {},\n  \"mcu_state_at_end\": {},\n  \"sim_s\": {:.3},\n  \"wall_s\": {:.3}\n}}\n",
         json_str(&r.scenario),
         r.tactile_feedback,
         json_str(r.outcome.name()),
@@ -296,6 +296,7 @@ pub fn summary_json(r: &SimReport) -> String {
         json_opt(percentile_ms(&lat, 0.5)),
         json_opt(percentile_ms(&lat, 0.99)),
         r.observations.len(),
+        r.max_loop_gap.as_secs_f64() * 1e3,
         json_str(&loop_result),
         json_str(&format!("{:?}", r.mcu_at_end.state)),
         r.sim_s,

@@ -223,6 +223,8 @@ pub struct SimReport {
     pub mcu_at_end: McuSnapshot,
     /// The host link's traffic counters.
     pub link_stats: LinkStats,
+    /// The longest wall-clock stall of the host's link thread.
+    pub max_loop_gap: Duration,
     /// The grasping chambers.
     pub grasp_chambers: Vec<usize>,
     /// Simulated run time, s.
@@ -500,6 +502,7 @@ struct Collected {
     frame_to_command: Vec<Duration>,
     observations: Vec<ObservationRecord>,
     snapshots: Vec<Snapshot>,
+    max_loop_gap: Duration,
 }
 
 /// Gathers the loop's events; keeps the live view for the monitor.
@@ -558,7 +561,8 @@ fn collect(rx: mpsc::Receiver<RuntimeEvent>, live: &Mutex<Live>) -> Collected {
                 }
                 c.commands.push((t_ms, msg, reason));
             }
-            RuntimeEvent::Telemetry { .. } | RuntimeEvent::Stopped { .. } => {}
+            RuntimeEvent::Stopped { max_loop_gap, .. } => c.max_loop_gap = max_loop_gap,
+            RuntimeEvent::Telemetry { .. } => {}
         }
     }
     c
@@ -634,6 +638,7 @@ fn build_report(
         loop_result,
         mcu_at_end,
         link_stats: LinkStats::default(),
+        max_loop_gap: c.max_loop_gap,
         grasp_chambers: control.grasp_chambers.clone(),
         sim_s: 0.0,
         wall_s: 0.0,
