@@ -34,6 +34,12 @@ fn run(name: &str, tactile: bool) -> SimReport {
         ..SimOptions::default()
     };
     let report = run_scenario(&scenario, &options).expect("simulated rig");
+    eprintln!(
+        "{name} (tactile {tactile}): {} in {:.1} s, longest host loop stall {:?}",
+        report.outcome.name(),
+        report.wall_s,
+        report.max_loop_gap
+    );
     assert!(
         report.loop_result.is_ok(),
         "{:?} (longest host loop stall {:?})",
