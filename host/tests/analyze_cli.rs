@@ -124,6 +124,11 @@ fn analyze_writes_centres_matching_the_truth() {
         header.starts_with("frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms")
     );
     assert_eq!(rows.len(), fx.truth.len());
+    assert!(
+        header.ends_with("shift_mm,shift_from_anchor_mm"),
+        "{header}"
+    );
+    check_shifts(&out);
     for (name, truth) in &fx.truth {
         let row = rows.iter().find(|r| &r.0 == name).unwrap();
         assert!(row.3 > 500, "{name}: {} markers", row.3);
@@ -143,6 +148,46 @@ fn analyze_writes_centres_matching_the_truth() {
         assert!(m.starts_with("x,y\n"));
         assert_eq!(m.lines().count(), row.3 + 1);
     }
+}
+
+/// Rows come in file order (idle, press_0, press_1, press_2): the shift
+/// columns are the centre moves in mm (0.1 mm/px by default) from the previous
+/// row and from the first contact.
+fn check_shifts(out: &Path) {
+    let text = std::fs::read_to_string(out).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let n = f.len();
+            vec![
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[n - 2].parse().unwrap(),
+                f[n - 1].parse().unwrap(),
+            ]
+        })
+        .collect();
+    assert!(
+        rows[0][2].is_nan() && rows[0][3].is_nan(),
+        "idle: {:?}",
+        rows[0]
+    );
+    assert!(
+        rows[1][2].is_nan() && rows[1][3] == 0.0,
+        "first contact: {:?}",
+        rows[1]
+    );
+    let mm = |a: &[f64], b: &[f64]| (a[0] - b[0]).hypot(a[1] - b[1]) * 0.1;
+    assert!(
+        (rows[2][2] - mm(&rows[2], &rows[1])).abs() < 1e-3,
+        "{rows:?}"
+    );
+    assert!(
+        (rows[3][3] - mm(&rows[3], &rows[1])).abs() < 1e-3,
+        "{rows:?}"
+    );
 }
 
 #[test]
