@@ -25,8 +25,9 @@ enum Command {
     /// Writes `frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms`
     /// then `area_mm2,source,skipped,shift_mm,shift_from_anchor_mm`; cx, cy in
     /// input-image pixels (NaN when no contact); shifts are the contact
-    /// centre's move from the previous frame and from the first contact, mm. Frames that cannot be read are reported on stderr and
-    /// left out; the exit status is then 1.
+    /// centre's move from the previous frame and from the first contact, mm.
+    /// Frames that cannot be read are reported on stderr and left out; the
+    /// exit status is then 1.
     Analyze(AnalyzeArgs),
     /// Accuracy against run time on synthetic scenes, per setting and scene
     /// category (Markdown to stdout, plot and tables to --out-dir).
