@@ -436,6 +436,12 @@ mod tests {
     }
 
     #[test]
+    fn shipped_sensor_config_equals_the_defaults() {
+        let text = include_str!("../sensors/digitac-v1.5.toml");
+        assert_eq!(Params::from_toml_str(text).unwrap(), Params::default());
+    }
+
+    #[test]
     fn missing_file_is_io_error() {
         let e = Params::load(Path::new("/nonexistent/dexitac.toml")).unwrap_err();
         assert!(matches!(e, ParamsError::Io { .. }));
