@@ -275,3 +275,34 @@ fn top_level_help_lists_analyze() {
         "{text}"
     );
 }
+
+#[test]
+fn larger_input_is_rescaled_and_centres_are_in_input_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = Category::Nominal.sensor(1280, 960, 3);
+    let rest = dir.path().join("rest.png");
+    save_grey(&synth::rest_frame(&sensor, 1), &rest);
+    let f = synth::render(&Category::Nominal.scene(&sensor, 77));
+    let frame = dir.path().join("big.png");
+    save_grey(&f, &frame);
+    let out = dir.path().join("pred.csv");
+    let r = run(&[
+        "analyze",
+        "--rest",
+        rest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        frame.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (_, rows) = read_csv(&out);
+    let t = f.contacts[0];
+    let err = (rows[0].1 - t.x).hypot(rows[0].2 - t.y);
+    // 2 input px per working px: 1 working px is 2 input px.
+    assert!(
+        err < 2.0,
+        "centre ({}, {}) vs truth {t:?}",
+        rows[0].1,
+        rows[0].2
+    );
+}
