@@ -181,7 +181,7 @@ impl Default for DensityParams {
             kernel_width_px: KERNEL_WIDTH_PX,
             mode: DensityMode::Fast,
             // Measured (BENCHMARKS.md): with tracking, step 8 keeps the centre
-            // error of step 4 (median ~0.1 px) at ~15 % less time.
+            // error of step 4 (median ~0.1 px) at ~12 % less time.
             grid_step_px: 8,
             truncate_sigmas: 3.0,
         }
