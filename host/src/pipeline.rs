@@ -326,6 +326,13 @@ mod tests {
     }
 
     #[test]
+    fn pipeline_can_run_on_its_own_thread_per_sensor() {
+        fn send_sync<T: Send + Sync>() {}
+        send_sync::<Pipeline>();
+        send_sync::<FrameResult>();
+    }
+
+    #[test]
     fn wrong_frame_size_is_an_error() {
         let params = Params::default();
         let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
