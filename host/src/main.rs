@@ -3,6 +3,7 @@
 mod analyze;
 mod bench_cmd;
 mod cli_kinematics;
+mod synth_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -32,6 +33,9 @@ enum Command {
     /// Accuracy against run time on synthetic scenes, per setting and scene
     /// category (Markdown to stdout, plot and tables to --out-dir).
     BenchPipeline(BenchArgs),
+    /// Seeded synthetic tactile frames with truth (rest.png, frames/,
+    /// truth.csv) to try `analyze` without a sensor.
+    SynthFrames(synth_cmd::SynthArgs),
     /// Workspace of one finger: points CSV, X-Y / X-Z / 3-D views (PNG),
     /// extents and volume (JSON) in --out.
     Workspace(cli_kinematics::WorkspaceArgs),
@@ -82,6 +86,7 @@ fn main() -> ExitCode {
     match cli.command {
         Some(Command::Analyze(args)) => analyze::run(&args),
         Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
+        Some(Command::SynthFrames(args)) => synth_cmd::run(&args),
         Some(Command::Workspace(args)) => {
             cli_kinematics::exit("workspace", cli_kinematics::run_workspace(&args))
         }

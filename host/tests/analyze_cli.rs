@@ -306,3 +306,46 @@ fn larger_input_is_rescaled_and_centres_are_in_input_pixels() {
         rows[0].2
     );
 }
+
+#[test]
+fn synth_frames_then_analyze_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sf");
+    let r = run(&[
+        "synth-frames",
+        "--out",
+        out.to_str().unwrap(),
+        "--frames",
+        "2",
+        "--category",
+        "edge",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let truth = std::fs::read_to_string(out.join("truth.csv")).unwrap();
+    assert_eq!(truth.lines().count(), 3, "{truth}");
+    let pred = out.join("pred.csv");
+    let r = run(&[
+        "analyze",
+        "--rest",
+        out.join("rest.png").to_str().unwrap(),
+        "--out",
+        pred.to_str().unwrap(),
+        out.join("frames").to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (_, rows) = read_csv(&pred);
+    for (line, row) in truth.lines().skip(1).zip(&rows) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f[0], row.0);
+        let (tx, ty): (f64, f64) = (f[1].parse().unwrap(), f[2].parse().unwrap());
+        assert!((row.1 - tx).hypot(row.2 - ty) < 1.5, "{line} vs {row:?}");
+    }
+    let bad = run(&[
+        "synth-frames",
+        "--out",
+        out.to_str().unwrap(),
+        "--category",
+        "nope",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+}
