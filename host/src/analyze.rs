@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use dexitac::calibrate;
+use dexitac::displacement::ShiftTracker;
 use dexitac::frame::{self, Prepared, RawFrame};
 use dexitac::params::Params;
 use dexitac::pipeline::Pipeline;
@@ -15,7 +16,7 @@ use crate::AnalyzeArgs;
 
 /// CSV header (the first eight columns are the interface; more may follow).
 const HEADER: &str =
-    "frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms,area_mm2,source,skipped";
+    "frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms,area_mm2,source,skipped,shift_mm,shift_from_anchor_mm";
 
 /// A decoded image file.
 struct Decoded {
@@ -90,6 +91,9 @@ fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
     let io_err = |e: std::io::Error| format!("writing {}: {e}", args.out.display());
     writeln!(out, "{HEADER}").map_err(io_err)?;
     let mut progress = Progress::new(files.len());
+    // Centre shifts in the order the frames are given; the anchor is the
+    // first contact centre.
+    let mut shifts = ShiftTracker::new(params.frame.mm_per_px);
     for (n, path) in files.iter().enumerate() {
         progress.show(n);
         match analyze_one(
@@ -99,7 +103,24 @@ fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
             (rest_w, rest_h),
             args.markers_out.as_deref(),
         ) {
-            Ok(row) => writeln!(out, "{row}").map_err(io_err)?,
+            Ok((row, centre)) => {
+                let shift = shifts.update(centre);
+                if centre.is_some() && shift.from_anchor_mm.is_none() {
+                    shifts.hold_anchor();
+                }
+                let from_anchor = match (centre, shift.from_anchor_mm) {
+                    (Some(_), None) => Some(0.0),
+                    (_, d) => d,
+                };
+                let mm = |v: Option<f64>| v.map_or("NaN".to_string(), |v| format!("{v:.4}"));
+                writeln!(
+                    out,
+                    "{row},{},{}",
+                    mm(shift.frame_to_frame_mm),
+                    mm(from_anchor)
+                )
+                .map_err(io_err)?
+            }
             Err(msg) => {
                 progress.clear();
                 eprintln!("dexitac analyze: {}: {msg}", path.display());
@@ -112,14 +133,15 @@ fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
     Ok(failed)
 }
 
-/// One frame -> one CSV row.
+/// One frame -> one CSV row (without the shift columns) and the contact
+/// centre in working px.
 fn analyze_one(
     path: &Path,
     pipeline: &Pipeline,
     params: &Params,
     rest_size: (usize, usize),
     markers_out: Option<&Path>,
-) -> Result<String, String> {
+) -> Result<(String, Option<PointPx>), String> {
     let d = decode(path)?;
     if (d.width, d.height) != rest_size {
         return Err(format!(
@@ -159,7 +181,7 @@ fn analyze_one(
         }
         None => ("NaN".into(), "NaN".into(), "0".into(), "none"),
     };
-    Ok(format!(
+    let row = format!(
         "{},{cx},{cy},{},{:.4},{:.4},{:.4},{:.4},{area},{source},{}",
         csv_field(&stem),
         r.markers.len(),
@@ -168,7 +190,8 @@ fn analyze_one(
         t.segment_ms,
         prepare_ms + t.total_ms,
         r.skipped
-    ))
+    );
+    Ok((row, r.contact.map(|c| c.centre)))
 }
 
 fn fmt(v: f64) -> String {

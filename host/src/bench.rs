@@ -1,7 +1,8 @@
 //! Accuracy against run time on synthetic scenes (`dexitac bench-pipeline`).
 //!
 //! For each pipeline [`Setting`] and scene [`Category`], renders seeded
-//! frames (one rest frame per category sensor), runs the calibrated pipeline
+//! frames on [`SENSORS_PER_CATEGORY`] sensors per category (each with its
+//! own rest frame and calibration), runs the calibrated pipeline
 //! and compares the contact centre with the truth: the error is the distance
 //! to the nearest true contact (two-contact scenes accept either), a frame of
 //! a contact category without a reported contact is a miss, a reported
@@ -80,6 +81,9 @@ pub fn settings() -> Vec<Setting> {
     ]
 }
 
+/// Sensors (rest frames, calibrations) per scene category in [`evaluate`].
+pub const SENSORS_PER_CATEGORY: usize = 4;
+
 /// One evaluated frame.
 #[derive(Debug, Clone, Copy)]
 pub struct Sample {
@@ -110,12 +114,20 @@ pub fn evaluate(
 ) -> Result<Vec<Sample>, CalibrationError> {
     let mut out = Vec::new();
     for (ci, &cat) in categories.iter().enumerate() {
-        let sensor = cat.sensor(width, height, seed.wrapping_add(ci as u64));
-        let rest = synth::rest_frame(&sensor, seed ^ 0xA5A5);
-        let cal = calibrate::calibrate(&[rest.image], &setting.params)?;
-        let pipeline = Pipeline::new(cal, setting.params.clone());
+        // Several sensors per category (marker size and lattice offset vary
+        // with the sensor seed), each with its own rest frame; frame k uses
+        // sensor k mod SENSORS_PER_CATEGORY.
+        let mut sensors = Vec::new();
+        for j in 0..SENSORS_PER_CATEGORY.min(frames.max(1)) {
+            let sensor_seed = seed.wrapping_add((ci * SENSORS_PER_CATEGORY + j) as u64);
+            let sensor = cat.sensor(width, height, sensor_seed);
+            let rest = synth::rest_frame(&sensor, sensor_seed ^ 0xA5A5);
+            let cal = calibrate::calibrate(&[rest.image], &setting.params)?;
+            sensors.push((sensor, Pipeline::new(cal, setting.params.clone())));
+        }
         for k in 0..frames {
-            let scene = cat.scene(&sensor, seed.wrapping_mul(1000).wrapping_add(k as u64));
+            let (sensor, pipeline) = &sensors[k % sensors.len()];
+            let scene = cat.scene(sensor, seed.wrapping_mul(1000).wrapping_add(k as u64));
             let frame = synth::render(&scene);
             // Invariant: the frame is rendered at the calibrated size.
             let r = pipeline.run(&frame.image).expect("same size as rest");

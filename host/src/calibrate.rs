@@ -182,3 +182,74 @@ fn sensing_mask(rest: &DensityMap) -> Vec<bool> {
         .map(|&v| v >= MASK_FRACTION * typical)
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synth::{rest_frame, Category};
+    use crate::test_fixtures;
+
+    fn median_error(found: &[PointPx], truth: &[PointPx]) -> f64 {
+        let mut d: Vec<f64> = test_fixtures::match_points(found, truth, 3.0)
+            .into_iter()
+            .map(|m| m.2)
+            .collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2]
+    }
+
+    #[test]
+    fn several_rest_frames_average_out_marker_noise() {
+        let mut sensor = Category::Nominal.sensor(640, 480, 2);
+        sensor.noise_sigma = 8.0;
+        let frames: Vec<_> = (0..4).map(|k| rest_frame(&sensor, 10 + k)).collect();
+        let truth = &frames[0].markers;
+        let params = Params::default();
+        let one = calibrate(&[frames[0].image.clone()], &params).unwrap();
+        let all: Vec<GreyFrame> = frames.iter().map(|f| f.image.clone()).collect();
+        let four = calibrate(&all, &params).unwrap();
+        assert!(four.rest_markers.len() as f64 >= 0.97 * truth.len() as f64);
+        let (e1, e4) = (
+            median_error(&one.rest_markers, truth),
+            median_error(&four.rest_markers, truth),
+        );
+        assert!(e4 < 0.8 * e1, "one frame {e1} px, four frames {e4} px");
+    }
+
+    #[test]
+    fn calibration_finds_pitch_mask_and_search_window() {
+        let params = Params::default();
+        let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
+        assert!((cal.pitch_px - 15.0).abs() < 0.3, "{}", cal.pitch_px);
+        let g = cal.density.grid();
+        let centre = (g.ny / 2) * g.nx + g.nx / 2;
+        assert!(
+            cal.mask[centre] && !cal.mask[0],
+            "mask must cover the skin only"
+        );
+        let [x0, y0, x1, y1] = cal.detector.window_px.unwrap();
+        assert!(
+            x0 > 0 && x1 < 640 && y0 < 30 && y1 > 450,
+            "{x0} {y0} {x1} {y1}"
+        );
+    }
+
+    #[test]
+    fn bad_rest_sets_are_typed_errors() {
+        let params = Params::default();
+        assert_eq!(
+            calibrate(&[], &params).unwrap_err(),
+            CalibrationError::NoFrames
+        );
+        let a = GreyFrame::new(64, 48, vec![0; 64 * 48]).unwrap();
+        let b = GreyFrame::new(32, 24, vec![0; 32 * 24]).unwrap();
+        assert!(matches!(
+            calibrate(&[a.clone(), b], &params),
+            Err(CalibrationError::SizeMismatch(..))
+        ));
+        assert!(matches!(
+            calibrate(&[a], &params),
+            Err(CalibrationError::Markers(_))
+        ));
+    }
+}

@@ -5,6 +5,7 @@ mod bench_cmd;
 mod cli_kinematics;
 mod cli_run;
 mod cli_sim;
+mod synth_cmd;
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,9 +26,11 @@ enum Command {
     /// Tactile pipeline on image files: contact centre per frame to a CSV.
     ///
     /// Writes `frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms`
-    /// then `area_mm2,source,skipped`; cx, cy in input-image pixels (NaN when
-    /// no contact). Frames that cannot be read are reported on stderr and
-    /// left out; the exit status is then 1.
+    /// then `area_mm2,source,skipped,shift_mm,shift_from_anchor_mm`; cx, cy in
+    /// input-image pixels (NaN when no contact); shifts are the contact
+    /// centre's move from the previous frame and from the first contact, mm.
+    /// Frames that cannot be read are reported on stderr and left out; the
+    /// exit status is then 1.
     Analyze(AnalyzeArgs),
     /// Accuracy against run time on synthetic scenes, per setting and scene
     /// category (Markdown to stdout, plot and tables to --out-dir).
@@ -37,6 +40,9 @@ enum Command {
     Sim(cli_sim::SimArgs),
     /// The task loop on the real gripper: serial port, gripper config, frame sources.
     Run(cli_run::RunArgs),
+    /// Seeded synthetic tactile frames with truth (rest.png, frames/,
+    /// truth.csv) to try `analyze` without a sensor.
+    SynthFrames(synth_cmd::SynthArgs),
     /// Workspace of one finger: points CSV, X-Y / X-Z / 3-D views (PNG),
     /// extents and volume (JSON) in --out.
     Workspace(cli_kinematics::WorkspaceArgs),
@@ -89,6 +95,7 @@ fn main() -> ExitCode {
         Some(Command::BenchPipeline(args)) => bench_cmd::run(&args),
         Some(Command::Sim(args)) => cli_sim::run(&args),
         Some(Command::Run(args)) => cli_run::run(&args),
+        Some(Command::SynthFrames(args)) => synth_cmd::run(&args),
         Some(Command::Workspace(args)) => {
             cli_kinematics::exit("workspace", cli_kinematics::run_workspace(&args))
         }

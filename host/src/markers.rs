@@ -9,13 +9,20 @@
 //! transpose, `Dxy = TL + BR - TR - BL` (four `l x l` boxes). With each
 //! divided by the lobe area `l (2l - 1)`, the blob strength is
 //! `sqrt(Dxx Dyy - (0.9 Dxy)^2)` (grey levels) where `Dxx < 0` and `Dyy < 0`
-//! (a bright blob), else 0. Local maxima above the threshold are refined on
-//! the full-resolution frame by a half-maximum intensity centroid.
+//! (a bright blob), else 0.
+//!
+//! Speed: the determinant is evaluated only at candidates, the 3x3 intensity
+//! maxima of the detection image at least [`Detector::min_level`] bright
+//! (half the dimmest rest markers' level), and only inside the calibrated
+//! search window around the sensing area. Candidates whose strength passes
+//! the threshold are refined on the full-resolution frame by a half-maximum
+//! intensity centroid; centroids closer than 2 px are one marker.
 //!
 //! The scale (lobe, and whether to detect on a 2x2-binned image for speed)
-//! is found from a rest frame by [`auto_detector`]; the config can override
-//! it. Markers closer than `(3l - 1) / 2` detection pixels to the image
-//! border are not detected.
+//! is found from a rest frame by [`auto_detector`]: the lobe whose
+//! scale-normalised strength map peaks highest; the config can override it.
+//! Markers closer than `(3l - 1) / 2` detection pixels to the image border
+//! are not detected.
 
 use crate::frame::GreyFrame;
 use crate::params::MarkerParams;

@@ -181,7 +181,7 @@ impl Default for DensityParams {
             kernel_width_px: KERNEL_WIDTH_PX,
             mode: DensityMode::Fast,
             // Measured (BENCHMARKS.md): with tracking, step 8 keeps the centre
-            // error of step 4 (median ~0.1 px) at ~9 % less time.
+            // error of step 4 (median ~0.1 px) at ~12 % less time.
             grid_step_px: 8,
             truncate_sigmas: 3.0,
         }
@@ -433,6 +433,12 @@ mod tests {
         assert!(Params::from_toml_str("[frame]\nmm_per_px = \"big\"\n").is_err());
         assert!(Params::from_toml_str("\u{0}\u{1}not toml[[").is_err());
         assert!(Params::from_toml_str("[contact]\nthreshold = \"sometimes\"\n").is_err());
+    }
+
+    #[test]
+    fn shipped_sensor_config_equals_the_defaults() {
+        let text = include_str!("../sensors/digitac-v1.5.toml");
+        assert_eq!(Params::from_toml_str(text).unwrap(), Params::default());
     }
 
     #[test]

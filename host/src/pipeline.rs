@@ -251,6 +251,22 @@ mod tests {
     }
 
     #[test]
+    fn rounded_rect_and_two_contact_frames_locate_a_contact() {
+        check_accuracy(Category::RoundedRect, 1.0, 5.0);
+        // Two contacts: the error is to the nearer true contact.
+        check_accuracy(Category::Two, 1.0, 5.0);
+    }
+
+    #[test]
+    fn saturated_big_markers_are_a_known_weak_spot() {
+        // 7.9 px markers at gain 2: markers squeezed at the rim of the dent
+        // merge into one blob, the density centre shifts by ~5 px and the
+        // tracked fit is too loose to replace it (BENCHMARKS.md). The bound
+        // documents today's behaviour; tighten it when this improves.
+        check_accuracy(Category::Saturated, 6.0, 8.0);
+    }
+
+    #[test]
     fn small_contacts_are_found_by_tracking_only() {
         let e = errors(Category::Small, &Params::default(), 6);
         let found: Vec<f64> = e.iter().flatten().copied().collect();
@@ -307,6 +323,13 @@ mod tests {
         let c = c.expect("absolute rule finds the rim");
         let from_centre = (c.centre.x - sensor.centre.x).hypot(c.centre.y - sensor.centre.y);
         assert!(from_centre > 150.0, "{c:?}");
+    }
+
+    #[test]
+    fn pipeline_can_run_on_its_own_thread_per_sensor() {
+        fn send_sync<T: Send + Sync>() {}
+        send_sync::<Pipeline>();
+        send_sync::<FrameResult>();
     }
 
     #[test]

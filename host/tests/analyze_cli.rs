@@ -124,6 +124,11 @@ fn analyze_writes_centres_matching_the_truth() {
         header.starts_with("frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms")
     );
     assert_eq!(rows.len(), fx.truth.len());
+    assert!(
+        header.ends_with("shift_mm,shift_from_anchor_mm"),
+        "{header}"
+    );
+    check_shifts(&out);
     for (name, truth) in &fx.truth {
         let row = rows.iter().find(|r| &r.0 == name).unwrap();
         assert!(row.3 > 500, "{name}: {} markers", row.3);
@@ -143,6 +148,46 @@ fn analyze_writes_centres_matching_the_truth() {
         assert!(m.starts_with("x,y\n"));
         assert_eq!(m.lines().count(), row.3 + 1);
     }
+}
+
+/// Rows come in file order (idle, press_0, press_1, press_2): the shift
+/// columns are the centre moves in mm (0.1 mm/px by default) from the previous
+/// row and from the first contact.
+fn check_shifts(out: &Path) {
+    let text = std::fs::read_to_string(out).unwrap();
+    let rows: Vec<Vec<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let n = f.len();
+            vec![
+                f[1].parse().unwrap(),
+                f[2].parse().unwrap(),
+                f[n - 2].parse().unwrap(),
+                f[n - 1].parse().unwrap(),
+            ]
+        })
+        .collect();
+    assert!(
+        rows[0][2].is_nan() && rows[0][3].is_nan(),
+        "idle: {:?}",
+        rows[0]
+    );
+    assert!(
+        rows[1][2].is_nan() && rows[1][3] == 0.0,
+        "first contact: {:?}",
+        rows[1]
+    );
+    let mm = |a: &[f64], b: &[f64]| (a[0] - b[0]).hypot(a[1] - b[1]) * 0.1;
+    assert!(
+        (rows[2][2] - mm(&rows[2], &rows[1])).abs() < 1e-3,
+        "{rows:?}"
+    );
+    assert!(
+        (rows[3][3] - mm(&rows[3], &rows[1])).abs() < 1e-3,
+        "{rows:?}"
+    );
 }
 
 #[test]
@@ -229,4 +274,78 @@ fn top_level_help_lists_analyze() {
         text.contains("analyze") && text.contains("bench-pipeline"),
         "{text}"
     );
+}
+
+#[test]
+fn larger_input_is_rescaled_and_centres_are_in_input_pixels() {
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = Category::Nominal.sensor(1280, 960, 3);
+    let rest = dir.path().join("rest.png");
+    save_grey(&synth::rest_frame(&sensor, 1), &rest);
+    let f = synth::render(&Category::Nominal.scene(&sensor, 77));
+    let frame = dir.path().join("big.png");
+    save_grey(&f, &frame);
+    let out = dir.path().join("pred.csv");
+    let r = run(&[
+        "analyze",
+        "--rest",
+        rest.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        frame.to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (_, rows) = read_csv(&out);
+    let t = f.contacts[0];
+    let err = (rows[0].1 - t.x).hypot(rows[0].2 - t.y);
+    // 2 input px per working px: 1 working px is 2 input px.
+    assert!(
+        err < 2.0,
+        "centre ({}, {}) vs truth {t:?}",
+        rows[0].1,
+        rows[0].2
+    );
+}
+
+#[test]
+fn synth_frames_then_analyze_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("sf");
+    let r = run(&[
+        "synth-frames",
+        "--out",
+        out.to_str().unwrap(),
+        "--frames",
+        "2",
+        "--category",
+        "edge",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let truth = std::fs::read_to_string(out.join("truth.csv")).unwrap();
+    assert_eq!(truth.lines().count(), 3, "{truth}");
+    let pred = out.join("pred.csv");
+    let r = run(&[
+        "analyze",
+        "--rest",
+        out.join("rest.png").to_str().unwrap(),
+        "--out",
+        pred.to_str().unwrap(),
+        out.join("frames").to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (_, rows) = read_csv(&pred);
+    for (line, row) in truth.lines().skip(1).zip(&rows) {
+        let f: Vec<&str> = line.split(',').collect();
+        assert_eq!(f[0], row.0);
+        let (tx, ty): (f64, f64) = (f[1].parse().unwrap(), f[2].parse().unwrap());
+        assert!((row.1 - tx).hypot(row.2 - ty) < 1.5, "{line} vs {row:?}");
+    }
+    let bad = run(&[
+        "synth-frames",
+        "--out",
+        out.to_str().unwrap(),
+        "--category",
+        "nope",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
 }

@@ -351,12 +351,14 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     );
     // Firmware time runs at about wall-clock speed (SysTick at 1 kHz). The
     // bound is loose: when the machine is busy, QEMU's SysTick drops periods
-    // and firmware time falls behind (ratios down to 0.58 seen on a loaded
-    // 2-core machine); a wrong core-clock constant would be off 3x.
+    // and firmware time falls behind (ratios below 0.4 seen on a 2-core
+    // machine running several builds at once); a SysTick reload computed for
+    // the wrong core clock (72 MHz instead of the 8 MHz QEMU runs) would be
+    // off 9x, 0.11, and still fails here.
     let mcu_ms = f64::from(last.time_ms - first.time_ms);
     let wall_ms = (last_at - first_at).as_secs_f64() * 1e3;
     assert!(
-        (0.4..1.5).contains(&(mcu_ms / wall_ms)),
+        (0.25..1.5).contains(&(mcu_ms / wall_ms)),
         "firmware ms {mcu_ms} vs wall ms {wall_ms}"
     );
     assert_eq!(last.state, ArmState::Armed);
