@@ -9,7 +9,7 @@
 //! - [`rig`] wires them to the host's task loop ([`crate::runtime`]) and
 //!   records what happened ([`rig::SimReport`]); [`output`] writes it to
 //!   files (`dexitac sim --out DIR`).
-//! - [`line`] makes the serial line noisy (corruption tests).
+//! - [`line`](mod@line) makes the serial line noisy (corruption tests).
 
 pub mod line;
 pub mod mcu;
