@@ -162,6 +162,23 @@ pub struct LinkStats {
     pub frame_errors: u64,
 }
 
+/// One read from a port whose reads time out: a timeout (or an interrupted
+/// or would-block read) means "no bytes yet", `Ok(0)`.
+pub fn read_ready(port: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
+    match port.read(buf) {
+        Ok(n) => Ok(n),
+        Err(e)
+            if matches!(
+                e.kind(),
+                io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock | io::ErrorKind::Interrupted
+            ) =>
+        {
+            Ok(0)
+        }
+        Err(e) => Err(e),
+    }
+}
+
 /// A byte port the link can drive.
 pub trait Port: Read + Write + Send {}
 impl<T: Read + Write + Send> Port for T {}
@@ -412,20 +429,7 @@ impl<P: Port> Link<P> {
     fn read_some(&mut self, wanted: impl Fn(&McuMsg) -> bool) -> Result<Option<McuMsg>, LinkError> {
         let mut buf = [0u8; 256];
         let port = self.port.as_mut().ok_or(LinkError::Disconnected)?;
-        let n = match port.read(&mut buf) {
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut
-                        | io::ErrorKind::WouldBlock
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
-                0
-            }
-            Err(e) => return Err(e.into()),
-        };
+        let n = read_ready(port, &mut buf)?;
         let mut found = None;
         let frames: Vec<_> = self.decoder.feed(buf.get(..n).unwrap_or(&[])).collect();
         for result in frames {

@@ -16,7 +16,7 @@
 //! ([`SimMcuConfig::clock`]). The plant's time keeps running across an MCU
 //! reset; the firmware's own clock restarts from zero.
 
-use std::io::{self, Read, Write};
+use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -305,20 +305,7 @@ fn run(
             hw = new_hw(&config);
             controller = Controller::new(config.firmware, ResetCause::Software);
         }
-        let n = match port.read(&mut buf) {
-            Ok(n) => n,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::TimedOut
-                        | io::ErrorKind::WouldBlock
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
-                0
-            }
-            Err(e) => return Err(e),
-        };
+        let n = crate::link::read_ready(&mut port, &mut buf)?;
         let now_ms = clock.now_ms();
         if now_ms > world_ms + MAX_LAG_MS {
             // Stalled for longer than the lag bound: skip the lost time
