@@ -15,7 +15,13 @@
 //! | pour | one forward tilt of `stroke_ms` | [`grasp_unstable`]: a centre moved more than `shift_limit_mm` from where it was at the start, or lost its contact | stop (hold) |
 //! | rotate | `cycles` forward turns of `stroke_ms`, `pause_ms` apart | [`grasp_unstable`] | stop (hold) |
 //! | shake | `cycles` forward + backward strokes of `stroke_ms` | [`x_shift_exceeded`]: a centre's x moved more than `shift_limit_mm` | stop (hold) |
-//! | twist | forward until [`near_edge`] (or `stroke_ms`), back for as long, `pause_ms`, `cycles` times | [`near_edge`]: a centre's \|x\| reached `edge_x_mm` | return, then repeat |
+//! | twist | forward until [`near_edge`] (or `stroke_ms`), return for `pause_ms`, `cycles` times | [`near_edge`]: a centre's \|x\| reached `edge_x_mm` | return, then repeat |
+//!
+//! The twist returns by venting both chambers of the joint
+//! ([`Drive::Relax`]): the pressure difference, and with it the joint
+//! angle, decays toward zero, the original grasping position, however far
+//! the twist went (there is no angle sensor; a timed backward stroke would
+//! overshoot).
 //!
 //! The primitive is part of the host's task loop ([`crate::runtime`]), so
 //! the same code runs on the simulated and on the real rig. While it runs it
@@ -100,7 +106,7 @@ pub struct TaskParams {
     pub gripper: Option<String>,
     /// Length of one stroke (twist: the longest forward stroke), ms.
     pub stroke_ms: u64,
-    /// Pause between strokes (rotate, twist), ms.
+    /// Pause between turns (rotate); return time (twist), ms.
     #[serde(default)]
     pub pause_ms: u64,
     /// Turns (rotate), back-and-forth cycles (shake), twists (twist);
@@ -174,6 +180,8 @@ pub enum Drive {
     Backward,
     /// Both sealed.
     Hold,
+    /// Both vented to the negative tank: the joint relaxes to straight.
+    Relax,
 }
 
 impl Drive {
@@ -185,6 +193,7 @@ impl Drive {
             Drive::Forward => (Inflate, Deflate),
             Drive::Backward => (Deflate, Inflate),
             Drive::Hold => (Hold, Hold),
+            Drive::Relax => (Deflate, Deflate),
         };
         let [[a0, b0], [a1, b1]] = MANIPULATION_CHAMBERS;
         [(a0, fwd), (b0, back), (a1, fwd), (b1, back)]
@@ -244,7 +253,7 @@ impl TaskEvent {
     pub fn drive(&self) -> Drive {
         match self {
             TaskEvent::Stroke { drive, .. } => *drive,
-            TaskEvent::Guard { stopped: false, .. } => Drive::Backward,
+            TaskEvent::Guard { stopped: false, .. } => Drive::Relax,
             TaskEvent::Guard { stopped: true, .. } | TaskEvent::Completed => Drive::Hold,
         }
     }
@@ -328,8 +337,6 @@ pub struct Primitive {
     phase: Phase,
     latest: [Option<CentreMm>; SENSOR_COUNT],
     reference: [Option<CentreMm>; SENSOR_COUNT],
-    /// Twist: how long the current forward stroke ran before the edge.
-    forward_ms: u64,
 }
 
 impl Primitive {
@@ -340,7 +347,6 @@ impl Primitive {
             phase: Phase::Idle,
             latest: [None; SENSOR_COUNT],
             reference: [None; SENSOR_COUNT],
-            forward_ms: 0,
         }
     }
 
@@ -419,10 +425,7 @@ impl Primitive {
             }
             TaskKind::Twist if drive == Drive::Forward => {
                 let trip = near_edge(self.latest, p.edge_x_mm)?;
-                if let Phase::Moving { since_ms, .. } = self.phase {
-                    self.forward_ms = t_ms.saturating_sub(since_ms);
-                }
-                self.stroke(n + 1, Drive::Backward, t_ms);
+                self.stroke(n + 1, Drive::Relax, t_ms);
                 Some(TaskEvent::Guard {
                     trip,
                     stopped: false,
@@ -475,18 +478,15 @@ impl Primitive {
             }
             TaskKind::Twist => match drive {
                 // No edge within the longest stroke: return anyway.
-                Drive::Forward if elapsed >= stroke => {
-                    self.forward_ms = elapsed;
-                    Some(self.stroke(n + 1, Drive::Backward, t_ms))
-                }
-                Drive::Backward if elapsed >= self.forward_ms => {
-                    let twists_done = n / 3 + 1;
+                Drive::Forward if elapsed >= stroke => Some(self.stroke(n + 1, Drive::Relax, t_ms)),
+                Drive::Forward => None,
+                _ if elapsed >= pause => {
+                    let twists_done = n / 2 + 1;
                     if twists_done >= cycles {
                         return self.finish(TaskEvent::Completed);
                     }
-                    Some(self.stroke(n + 1, Drive::Hold, t_ms))
+                    Some(self.stroke(n + 1, Drive::Forward, t_ms))
                 }
-                Drive::Hold if elapsed >= pause => Some(self.stroke(n + 1, Drive::Forward, t_ms)),
                 _ => None,
             },
         }
@@ -642,30 +642,36 @@ mod tests {
 
     #[test]
     fn twist_returns_at_the_edge_and_repeats() {
-        let mut p = Primitive::new(params(TaskKind::Twist));
+        let mut p = Primitive::new(TaskParams {
+            pause_ms: 1_500,
+            ..params(TaskKind::Twist)
+        });
         p.start(0);
-        // x follows the twist: +10 mm/s forward, -10 mm/s back.
+        // x follows the twist: +10 mm/s forward, decays while relaxing.
         let x = std::cell::Cell::new(0.0);
         let mut events = Vec::new();
         for t in (10..=10_000).step_by(10) {
-            let dx = match p.phase {
+            match p.phase {
                 Phase::Moving {
                     drive: Drive::Forward,
                     ..
-                } => 0.1,
+                } => x.set(x.get() + 0.1),
                 Phase::Moving {
-                    drive: Drive::Backward,
+                    drive: Drive::Relax,
                     ..
-                } => -0.1,
-                _ => 0.0,
-            };
-            x.set(x.get() + dx);
+                } => x.set(x.get() * 0.97),
+                _ => {}
+            }
             for s in 0..SENSOR_COUNT {
                 if let Some(e) = p.observe(s, t, c(x.get(), 0.0)) {
                     events.push(e);
                 }
             }
             if let Some(e) = p.tick(t) {
+                if matches!(e, TaskEvent::Stroke { n: 2, .. }) {
+                    // Returned before twisting again.
+                    assert!(x.get().abs() < 0.25, "x = {}", x.get());
+                }
                 events.push(e);
             }
         }
