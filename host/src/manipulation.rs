@@ -277,7 +277,7 @@ pub fn grasp_unstable(
             }
             Some(c) => {
                 let d = (c.x_mm - r.x_mm).hypot(c.y_mm - r.y_mm);
-                if !(d <= limit_mm) {
+                if d.is_nan() || d > limit_mm {
                     return Some(GuardTrip::Unstable {
                         sensor,
                         shift_mm: Some(d),
@@ -300,7 +300,7 @@ pub fn x_shift_exceeded(
     for sensor in 0..SENSOR_COUNT {
         let Some(r) = reference[sensor] else { continue };
         let shift_mm = now[sensor].map_or(f64::INFINITY, |c| (c.x_mm - r.x_mm).abs());
-        if !(shift_mm <= limit_mm) {
+        if shift_mm.is_nan() || shift_mm > limit_mm {
             return Some(GuardTrip::XShift { sensor, shift_mm });
         }
     }
@@ -312,7 +312,7 @@ pub fn x_shift_exceeded(
 pub fn near_edge(now: [Option<CentreMm>; SENSOR_COUNT], edge_x_mm: f64) -> Option<GuardTrip> {
     (0..SENSOR_COUNT).find_map(|sensor| {
         now[sensor]
-            .filter(|c| !(c.x_mm.abs() < edge_x_mm))
+            .filter(|c| c.x_mm.is_nan() || c.x_mm.abs() >= edge_x_mm)
             .map(|c| GuardTrip::NearEdge {
                 sensor,
                 x_mm: c.x_mm,

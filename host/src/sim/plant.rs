@@ -475,10 +475,9 @@ impl Plant {
         s.external_n = pokes.iter().map(|(_, f)| f).sum();
         let (z, x, az) = self.trajectory.at(t_s);
         s.gripper_mm = (z, x);
-        for f in 0..FINGER_COUNT {
+        for (f, [a, b]) in MANIPULATION_CHAMBERS.into_iter().enumerate() {
             s.finger_deg[f] =
                 p.deg_per_kpa * finger_pressure_kpa(&s.chambers_kpa, &self.grasp_chambers, f);
-            let [a, b] = MANIPULATION_CHAMBERS[f];
             s.manip_deg[f] = p.manip_deg_per_kpa * (s.chambers_kpa[a] - s.chambers_kpa[b]);
         }
         let Some(obj) = &self.object else {
