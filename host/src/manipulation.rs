@@ -685,7 +685,66 @@ mod tests {
         assert!(x.get().abs() < 0.25, "x = {}", x.get());
     }
 
+    #[test]
+    fn bad_task_settings_are_named() {
+        let bad = |f: fn(&mut TaskParams)| {
+            let mut p = params(TaskKind::Shake);
+            f(&mut p);
+            p.validate().map(|_| ()).map_err(|(field, _, _)| field)
+        };
+        assert_eq!(bad(|_| {}), Ok(()));
+        assert_eq!(bad(|p| p.stroke_ms = 0), Err("task.stroke_ms"));
+        assert_eq!(bad(|p| p.cycles = 0), Err("task.cycles"));
+        assert_eq!(
+            bad(|p| p.shift_limit_mm = f64::NAN),
+            Err("task.shift_limit_mm")
+        );
+        assert_eq!(bad(|p| p.edge_x_mm = -1.0), Err("task.edge_x_mm"));
+        assert_eq!(
+            bad(|p| p.gripper = Some("claw".into())),
+            Err("task.gripper")
+        );
+        let text = "kind = \"stir\"\nstroke_ms = 10\n";
+        assert!(toml::from_str::<TaskParams>(text).is_err());
+        let text = "kind = \"twist\"\nstroke_ms = 10\nedge_mm = 3.0\n";
+        assert!(toml::from_str::<TaskParams>(text).is_err());
+    }
+
+    fn centre() -> impl Strategy<Value = Option<CentreMm>> {
+        proptest::option::of(
+            (-30.0f64..30.0, -30.0f64..30.0).prop_map(|(x_mm, y_mm)| CentreMm { x_mm, y_mm }),
+        )
+    }
+
     proptest! {
+        /// The guards trip exactly at their thresholds.
+        #[test]
+        fn guards_trip_exactly_past_their_limits(
+            r0 in centre(), r1 in centre(), n0 in centre(), n1 in centre(),
+            limit_mm in 0.1f64..10.0,
+        ) {
+            let (r, n) = ([r0, r1], [n0, n1]);
+            let lost = (0..2).any(|s| r[s].is_some() && n[s].is_none());
+            let shift = |s: usize, f: &dyn Fn(CentreMm, CentreMm) -> f64| {
+                r[s].zip(n[s]).map_or(0.0, |(a, b)| f(a, b))
+            };
+            let dist = |a: CentreMm, b: CentreMm| (a.x_mm - b.x_mm).hypot(a.y_mm - b.y_mm);
+            let dx = |a: CentreMm, b: CentreMm| (a.x_mm - b.x_mm).abs();
+            let moved = (0..2).any(|s| shift(s, &dist) > limit_mm);
+            let moved_x = (0..2).any(|s| shift(s, &dx) > limit_mm);
+            prop_assert_eq!(grasp_unstable(r, n, limit_mm).is_some(), lost || moved);
+            prop_assert_eq!(x_shift_exceeded(r, n, limit_mm).is_some(), lost || moved_x);
+            let edge = n.iter().flatten().any(|c| c.x_mm.abs() >= limit_mm);
+            prop_assert_eq!(near_edge(n, limit_mm).is_some(), edge);
+            // A motion along y alone never trips the shake guard.
+            let along_y = n.map(|c| c.map(|c| CentreMm { x_mm: 0.0, ..c }));
+            let r_x0 = r.map(|c| c.map(|c| CentreMm { x_mm: 0.0, ..c }));
+            prop_assert_eq!(
+                x_shift_exceeded(r_x0, along_y, limit_mm).is_some(),
+                (0..2).any(|s| r_x0[s].is_some() && along_y[s].is_none())
+            );
+        }
+
         /// Whatever the centres do, a primitive ends within its stroke
         /// budget and never commands a drive after it is done.
         #[test]
