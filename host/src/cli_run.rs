@@ -21,6 +21,12 @@
 //! slip_shift_mm = 5.0
 //! stable_span_ms = 3000
 //! no_contact_timeout_ms = 10000
+//! [task]                           # optional: a manipulation primitive once stable
+//! kind = "twist"                   # pour | rotate | shake | twist (dexitac::manipulation)
+//! stroke_ms = 4000
+//! pause_ms = 2500
+//! cycles = 2
+//! edge_x_mm = 9.0
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -76,6 +82,9 @@ struct GripperConfig {
     open_loop_close_s: f64,
     sensor_config: Option<PathBuf>,
     grasp: GraspConfig,
+    /// A manipulation primitive to run once the grasp is stable (the
+    /// `[task]` table of a simulator scenario, `dexitac::manipulation`).
+    task: Option<dexitac::manipulation::TaskParams>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -111,6 +120,7 @@ impl Default for GripperConfig {
             open_loop_close_s: c.open_loop_close_ms as f64 / 1e3,
             sensor_config: None,
             grasp: GraspConfig::default(),
+            task: None,
         }
     }
 }
@@ -121,6 +131,11 @@ impl GripperConfig {
             .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
         let config: GripperConfig =
             toml::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        if let Some(task) = &config.task {
+            task.validate().map_err(|(field, value, reason)| {
+                format!("{}: {field} = {value}: {reason}", path.display())
+            })?;
+        }
         let g = &config.grasp;
         let finite_pos = |v: f64| v.is_finite() && v > 0.0;
         if !(finite_pos(g.stable_shift_mm) && finite_pos(g.slip_shift_mm))
@@ -170,6 +185,7 @@ impl GripperConfig {
             ),
             tactile_feedback: self.tactile_feedback,
             open_loop_close_ms: (self.open_loop_close_s * 1e3) as u64,
+            task: self.task.clone(),
             ..ControlConfig::default()
         })
     }
@@ -335,6 +351,9 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
                     t_ms, msg, reason, ..
                 } => {
                     eprintln!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
+                }
+                RuntimeEvent::Task { t_ms, event } => {
+                    eprintln!("{:9.3} s  task: {event:?}", t_ms as f64 / 1e3);
                 }
                 RuntimeEvent::Stopped {
                     t_ms,

@@ -106,6 +106,27 @@ pub fn run(args: &SimArgs) -> ExitCode {
         report.disturbances.len(),
         args.out.display()
     );
+    if let Some(t) = &report.task {
+        let fmt =
+            |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.1} {unit}"));
+        println!(
+            "  task {} ({}): achieved {} / {} (paper {} / {}), {}{} guard trip(s); simulated with invented plant coefficients",
+            t.kind.name(),
+            t.gripper,
+            fmt(t.achieved_deg, "deg"),
+            fmt(t.achieved_mm, "mm"),
+            fmt(Some(t.kind.paper_deg()), "deg"),
+            fmt(t.kind.paper_mm(), "mm"),
+            if t.stopped_by_guard {
+                "stopped by its guard, "
+            } else if t.completed {
+                "completed, "
+            } else {
+                "not finished, "
+            },
+            t.guard_trips
+        );
+    }
     for d in &report.disturbances {
         println!(
             "  poke {:?} at {:.2} s: detected {}, valves open {}",

@@ -57,3 +57,6 @@ pub mod actuator;
 pub mod gripper;
 pub mod kinematics;
 pub mod workspace;
+
+// Tactile-guarded manipulation primitives (issue 6, item 5).
+pub mod manipulation;

@@ -34,6 +34,17 @@
 //! (default: the paper's ClosureGrip time to stable, Table III), then seal,
 //! and nothing after that.
 //!
+//! # Manipulation
+//!
+//! With a [`ControlConfig::task`] (and tactile feedback on), the first
+//! [`Command::Seal`] starts the [`crate::manipulation::Primitive`]. From then
+//! on the primitive owns the grasp: it gets every observation and clock tick,
+//! the grasp state machine none (the manipulated object moves the contact
+//! centres by design; the primitive's tactile guards take its place). Each
+//! of its events is reported ([`RuntimeEvent::Task`]) and sent as
+//! `SetChambers`: grasping chambers `Hold` (sealed), the manipulation
+//! chambers ([`crate::manipulation::MANIPULATION_CHAMBERS`]) per the drive.
+//!
 //! # Stopping
 //!
 //! The loop ends when the stop flag is set (Ctrl-C, end of a scenario), when
@@ -62,6 +73,7 @@ use dexitac_protocol::{
 use crate::frame::{FrameError, GreyFrame};
 use crate::grasp::{CentreMm, Command, Decision, Grasp, GraspParams, Observation, SENSOR_COUNT};
 use crate::link::{Link, LinkError, McuEvent, Port};
+use crate::manipulation::{Primitive, TaskEvent, TaskParams};
 use crate::pipeline::Pipeline;
 use crate::PointPx;
 
@@ -189,6 +201,9 @@ pub struct ControlConfig {
     pub tactile_feedback: bool,
     /// Without tactile feedback: seal this long after closing began, ms.
     pub open_loop_close_ms: u64,
+    /// A manipulation primitive to run once the grasp is stable and sealed
+    /// (see [Manipulation](self#manipulation)).
+    pub task: Option<TaskParams>,
 }
 
 impl Default for ControlConfig {
@@ -202,6 +217,7 @@ impl Default for ControlConfig {
             telemetry_interval_ms: 20,
             tactile_feedback: true,
             open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
+            task: None,
         }
     }
 }
@@ -280,6 +296,13 @@ pub enum RuntimeEvent {
         t_ms: u64,
         /// The report.
         telemetry: Telemetry,
+    },
+    /// The manipulation primitive reported (and commanded `event.drive()`).
+    Task {
+        /// When the loop handled it.
+        t_ms: u64,
+        /// What happened.
+        event: TaskEvent,
     },
     /// The loop ended (after the shutdown commands).
     Stopped {
@@ -398,6 +421,7 @@ struct Control<'a, P> {
     stage: Stage,
     positive_tank_pa: Option<i32>,
     max_loop_gap: Duration,
+    task: Option<Primitive>,
 }
 
 impl<P: Port> Control<'_, P> {
@@ -524,7 +548,11 @@ impl<P: Port> Control<'_, P> {
             }
             _ => {}
         }
-        if self.config.tactile_feedback {
+        if self.task_started() {
+            if let Some(e) = self.task.as_mut().and_then(|p| p.tick(now)) {
+                self.on_task(e, None)?;
+            }
+        } else if self.config.tactile_feedback {
             if let Some(d) = self.grasp.tick(now) {
                 self.act(d, None)?;
             }
@@ -553,7 +581,41 @@ impl<P: Port> Control<'_, P> {
             ),
         };
         self.stage = Stage::Sealed;
-        self.send(msg, reason, arrived)
+        self.send(msg, reason, arrived)?;
+        if decision.command == Command::Seal {
+            let now = self.clock.now_ms();
+            if let Some(e) = self.task.as_mut().and_then(|p| p.start(now)) {
+                self.on_task(e, arrived)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A manipulation primitive has started (it then owns the grasp).
+    fn task_started(&self) -> bool {
+        self.task.as_ref().is_some_and(|p| p.running() || p.done())
+    }
+
+    /// Reports a primitive's event and commands its drive: the grasping
+    /// chambers stay sealed, the manipulation chambers follow the drive.
+    fn on_task(&mut self, event: TaskEvent, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+        let _ = self.events.send(RuntimeEvent::Task {
+            t_ms: self.clock.now_ms(),
+            event,
+        });
+        let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
+        for (i, state) in event.drive().valves() {
+            if let Some(slot) = chambers.get_mut(i) {
+                *slot = state;
+            }
+        }
+        let reason = match event {
+            TaskEvent::Stroke { .. } => "task: stroke",
+            TaskEvent::Guard { stopped: true, .. } => "task: guard stop",
+            TaskEvent::Guard { stopped: false, .. } => "task: guard return",
+            TaskEvent::Completed => "task: completed",
+        };
+        self.send(HostMsg::SetChambers { chambers }, reason, arrived)
     }
 
     fn on_sensor(&mut self, msg: SensorMsg) -> Result<bool, RuntimeError> {
@@ -573,7 +635,18 @@ impl<P: Port> Control<'_, P> {
                     markers,
                     pipeline_ms,
                 });
-                if self.config.tactile_feedback && !matches!(self.stage, Stage::Charging { .. }) {
+                let started = self.task_started();
+                if let Some(e) = self
+                    .task
+                    .as_mut()
+                    .and_then(|p| p.observe(sensor, t_ms, centre_mm))
+                {
+                    self.on_task(e, Some(arrived))?;
+                }
+                if !started
+                    && self.config.tactile_feedback
+                    && !matches!(self.stage, Stage::Charging { .. })
+                {
                     let obs = Observation { t_ms, centre_mm };
                     if let Some(d) = self.grasp.observe(sensor, obs) {
                         self.act(d, Some(arrived))?;
@@ -682,6 +755,11 @@ pub fn run<P: Port>(
         stage: Stage::Charging { since_ms: 0 },
         positive_tank_pa: None,
         max_loop_gap: Duration::ZERO,
+        task: config
+            .task
+            .clone()
+            .filter(|_| config.tactile_feedback)
+            .map(Primitive::new),
     };
     let result = std::thread::scope(|scope| {
         for (i, sensor) in sensors.into_iter().enumerate() {

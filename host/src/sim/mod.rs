@@ -10,6 +10,7 @@
 //!   records what happened ([`rig::SimReport`]); [`output`] writes it to
 //!   files (`dexitac sim --out DIR`).
 //! - [`line`](mod@line) makes the serial line noisy (corruption tests).
+//! - [`task_report`] measures what a manipulation task achieved.
 
 pub mod line;
 pub mod mcu;
@@ -18,3 +19,4 @@ pub mod plant;
 pub mod render;
 pub mod rig;
 pub mod scenario;
+pub mod task_report;

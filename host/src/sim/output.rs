@@ -285,8 +285,9 @@ pub fn summary_json(r: &SimReport) -> String {
         Err(e) => format!("error: {e}"),
     };
     format!(
-        "{{\n  \"scenario\": {},\n  \"tactile_feedback\": {},\n  \"outcome\": {},\n  \"time_to_stable_s\": {},\n  \"disturbances\": [\n{}\n  ],\n  \"dropped_at_s\": {},\n  \"frame_to_command_ms\": {{\"count\": {}, \"median\": {}, \"p99\": {}}},\n  \"frames\": {},\n  \"host_max_loop_gap_ms\": {:.1},\n  \"loop_result\": {},\n  \"mcu_state_at_end\": {},\n  \"sim_s\": {:.3},\n  \"wall_s\": {:.3}\n}}\n",
+        "{{\n  \"scenario\": {},\n{}  \"tactile_feedback\": {},\n  \"outcome\": {},\n  \"time_to_stable_s\": {},\n  \"disturbances\": [\n{}\n  ],\n  \"dropped_at_s\": {},\n  \"frame_to_command_ms\": {{\"count\": {}, \"median\": {}, \"p99\": {}}},\n  \"frames\": {},\n  \"host_max_loop_gap_ms\": {:.1},\n  \"loop_result\": {},\n  \"mcu_state_at_end\": {},\n  \"sim_s\": {:.3},\n  \"wall_s\": {:.3}\n}}\n",
         json_str(&r.scenario),
+        task_json(r),
         r.tactile_feedback,
         json_str(r.outcome.name()),
         json_opt(r.time_to_stable_s),
@@ -301,6 +302,29 @@ pub fn summary_json(r: &SimReport) -> String {
         json_str(&format!("{:?}", r.mcu_at_end.state)),
         r.sim_s,
         r.wall_s
+    )
+}
+
+/// The manipulation task's lines of `summary.json` (empty without a task).
+/// The simulated angles come from invented plant coefficients
+/// ([`crate::sim::task_report`]); the paper's are ArUco measurements.
+fn task_json(r: &SimReport) -> String {
+    let Some(t) = &r.task else {
+        return String::new();
+    };
+    let per_cycle: Vec<String> = t.per_cycle_deg.iter().map(|d| format!("{d:.2}")).collect();
+    format!(
+        "  \"task\": {},\n  \"gripper\": {},\n  \"achieved_deg\": {},\n  \"paper_deg\": {},\n  \"achieved_mm\": {},\n  \"paper_mm\": {},\n  \"per_cycle_deg\": [{}],\n  \"task_completed\": {},\n  \"stopped_by_guard\": {},\n  \"guard_trips\": {},\n  \"task_angles_from\": \"simulated plant with invented coefficients\",\n",
+        json_str(t.kind.name()),
+        json_str(&t.gripper),
+        json_opt(t.achieved_deg),
+        t.kind.paper_deg(),
+        json_opt(t.achieved_mm),
+        json_opt(t.kind.paper_mm()),
+        per_cycle.join(", "),
+        t.completed,
+        t.stopped_by_guard,
+        t.guard_trips
     )
 }
 

@@ -37,6 +37,14 @@
 //!   tangential displacement plus the slide, plus a small roll with the
 //!   joint angle.
 //!
+//! - **Manipulation** (issue 6): each finger's manipulation joint turns
+//!   `manip_deg_per_kpa` per kPa of pressure difference between its two
+//!   chambers ([`MANIPULATION_CHAMBERS`]); while both fingers touch it the
+//!   object follows their mean angle ([`WorldState::object_deg`]), its
+//!   contacts roll by [`ObjectParams::manip_roll_mm_per_deg`] per degree and
+//!   creep in x by [`ObjectParams::manip_creep_x_mm_per_deg`] per degree of
+//!   travel (a loose object; 0 by default).
+//!
 //! The coefficients are not measured on the real gripper; they are chosen
 //! so that forces and shifts have the magnitudes of the paper's experiments
 //! (a 100 g object, ~3 N pokes, shifts of 0.5-5 mm). All live in
@@ -44,6 +52,8 @@
 
 use dexitac_protocol::{Chambers, ValveState, CHAMBER_COUNT};
 use serde::Deserialize;
+
+use crate::manipulation::MANIPULATION_CHAMBERS;
 
 /// Standard gravity, m/s^2.
 const GRAVITY_M_PER_S2: f64 = 9.81;
@@ -76,6 +86,10 @@ pub struct PlantParams {
     pub back_load_coupling: f64,
     /// Contact roll (object twist) per newton of a poke on the back of a fingertip, mm/N.
     pub back_twist_mm_per_n: f64,
+    /// Manipulation joint angle per kPa of pressure difference between its
+    /// two chambers ([`MANIPULATION_CHAMBERS`]), deg/kPa; 0: the joint does
+    /// not move the object (the grasp scenarios).
+    pub manip_deg_per_kpa: f64,
 }
 
 impl Default for PlantParams {
@@ -91,6 +105,7 @@ impl Default for PlantParams {
             actuator_roll_mm_per_n: 0.45,
             back_load_coupling: 0.8,
             back_twist_mm_per_n: 0.35,
+            manip_deg_per_kpa: 0.0,
         }
     }
 }
@@ -115,6 +130,12 @@ pub struct ObjectParams {
     pub contact_mm: [[f64; 2]; FINGER_COUNT],
     /// Contact patch width on the skin, mm.
     pub contact_width_mm: f64,
+    /// Contact centre shift (x, y) per degree of object rotation by the
+    /// manipulation joints, mm/deg (the object rolls on the pads).
+    pub manip_roll_mm_per_deg: [f64; 2],
+    /// Contact centre x creep per degree of manipulation travel (either
+    /// direction): the object working loose, mm/deg.
+    pub manip_creep_x_mm_per_deg: f64,
 }
 
 impl Default for ObjectParams {
@@ -128,6 +149,8 @@ impl Default for ObjectParams {
             drop_slide_mm: 15.0,
             contact_mm: [[-1.5, -2.0], [2.0, -1.0]],
             contact_width_mm: 2.5,
+            manip_roll_mm_per_deg: [0.0, 0.0],
+            manip_creep_x_mm_per_deg: 0.0,
         }
     }
 }
@@ -309,6 +332,13 @@ pub struct WorldState {
     pub external_n: f64,
     /// Gripper height and horizontal position, mm.
     pub gripper_mm: (f64, f64),
+    /// Manipulation joint angle of each finger, deg.
+    pub manip_deg: [f64; FINGER_COUNT],
+    /// Object rotation by the manipulation joints, deg (it follows the
+    /// fingers' mean manipulation angle while both touch it).
+    pub object_deg: f64,
+    /// Accumulated x creep of the contacts, mm.
+    pub creep_x_mm: f64,
 }
 
 /// The world: actuators, fingers, object and pokes.
@@ -353,6 +383,9 @@ impl Plant {
             load_n: 0.0,
             external_n: 0.0,
             gripper_mm: (0.0, 0.0),
+            manip_deg: [0.0; FINGER_COUNT],
+            object_deg: 0.0,
+            creep_x_mm: 0.0,
         };
         Plant {
             params,
@@ -442,9 +475,10 @@ impl Plant {
         s.external_n = pokes.iter().map(|(_, f)| f).sum();
         let (z, x, az) = self.trajectory.at(t_s);
         s.gripper_mm = (z, x);
-        for f in 0..FINGER_COUNT {
+        for (f, [a, b]) in MANIPULATION_CHAMBERS.into_iter().enumerate() {
             s.finger_deg[f] =
                 p.deg_per_kpa * finger_pressure_kpa(&s.chambers_kpa, &self.grasp_chambers, f);
+            s.manip_deg[f] = p.manip_deg_per_kpa * (s.chambers_kpa[a] - s.chambers_kpa[b]);
         }
         let Some(obj) = &self.object else {
             s.contacts = [None; FINGER_COUNT];
@@ -503,6 +537,12 @@ impl Plant {
             s.contacts = [None; FINGER_COUNT];
             return;
         }
+        if both {
+            let deg = s.manip_deg.iter().sum::<f64>() / FINGER_COUNT as f64;
+            s.creep_x_mm += obj.manip_creep_x_mm_per_deg * (deg - s.object_deg).abs();
+            s.object_deg = deg;
+        }
+        let manip_roll_mm = obj.manip_roll_mm_per_deg.map(|k| k * s.object_deg);
         let carried_n = s.load_n.min(s.capacity_n);
         let shear_mm = if both {
             carried_n / 2.0 / obj.shear_stiffness_n_per_mm.max(1e-6)
@@ -514,8 +554,8 @@ impl Plant {
                 let base = obj.contact_mm[f];
                 ContactState {
                     centre_mm: [
-                        base[0] + roll_mm[f][0],
-                        base[1] + s.slide_mm + shear_mm + roll_mm[f][1],
+                        base[0] + roll_mm[f][0] + manip_roll_mm[0] + s.creep_x_mm,
+                        base[1] + s.slide_mm + shear_mm + roll_mm[f][1] + manip_roll_mm[1],
                     ],
                     // The tangential displacement moves the press on the
                     // skin (the object rolls on the soft pad); no separate

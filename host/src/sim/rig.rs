@@ -44,6 +44,7 @@ use crate::sim::mcu::{lock_plant, McuSnapshot, SharedPlant, SimMcu, SimMcuConfig
 use crate::sim::plant::{ObjectState, Plant, Poke, WorldState, FINGER_COUNT};
 use crate::sim::render::Renderer;
 use crate::sim::scenario::Scenario;
+use crate::sim::task_report::{task_report, TaskReport};
 use crate::synth::SensorSpec;
 use crate::PointPx;
 
@@ -227,6 +228,8 @@ pub struct SimReport {
     pub max_loop_gap: Duration,
     /// The grasping chambers.
     pub grasp_chambers: Vec<usize>,
+    /// The manipulation task's outcome, if the scenario has one and it started.
+    pub task: Option<TaskReport>,
     /// Simulated run time, s.
     pub sim_s: f64,
     /// Wall-clock run time, s.
@@ -318,6 +321,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     let wall_start = Instant::now();
     let control = ControlConfig {
         tactile_feedback: options.tactile_feedback,
+        task: scenario.task.clone(),
         ..ControlConfig::default()
     };
     let params = Params::default();
@@ -503,6 +507,7 @@ struct Collected {
     observations: Vec<ObservationRecord>,
     snapshots: Vec<Snapshot>,
     max_loop_gap: Duration,
+    task_events: Vec<(u64, crate::manipulation::TaskEvent)>,
 }
 
 /// Gathers the loop's events; keeps the live view for the monitor.
@@ -550,6 +555,9 @@ fn collect(rx: mpsc::Receiver<RuntimeEvent>, live: &Mutex<Live>) -> Collected {
                     "disturbance: reopen inflation" => "reinforcing",
                     "release" => "released",
                     "close fingers" => "closing",
+                    "task: stroke" | "task: guard return" => "manipulating",
+                    "task: guard stop" => "guard stop",
+                    "task: completed" => "task done",
                     _ => "charging",
                 }
                 .to_string();
@@ -563,6 +571,7 @@ fn collect(rx: mpsc::Receiver<RuntimeEvent>, live: &Mutex<Live>) -> Collected {
             }
             RuntimeEvent::Stopped { max_loop_gap, .. } => c.max_loop_gap = max_loop_gap,
             RuntimeEvent::Telemetry { .. } => {}
+            RuntimeEvent::Task { t_ms, event } => c.task_events.push((t_ms, event)),
         }
     }
     c
@@ -620,6 +629,10 @@ fn build_report(
         .zip(stable_ms)
         .map(|(a, b)| b.saturating_sub(a) as f64 / 1e3);
     let disturbances = disturbance_timings(scenario, control, plant, &c);
+    let task = scenario
+        .task
+        .as_ref()
+        .and_then(|t| task_report(t, c.task_events, plant.trace()));
     SimReport {
         scenario: scenario.name.clone(),
         tactile_feedback: options.tactile_feedback,
@@ -640,6 +653,7 @@ fn build_report(
         link_stats: LinkStats::default(),
         max_loop_gap: c.max_loop_gap,
         grasp_chambers: control.grasp_chambers.clone(),
+        task,
         sim_s: 0.0,
         wall_s: 0.0,
     }

@@ -11,6 +11,9 @@
 //! [plant]                     # sim::plant::PlantParams (all optional)
 //! [trajectory]                # lift and move, s and mm
 //! lift_at_s = 10.0
+//! [task]                      # manipulation::TaskParams (optional)
+//! kind = "pour"               # pour | rotate | shake | twist
+//! stroke_ms = 3000
 //! [[poke]]                    # external forces
 //! target = "object"           # object | actuator | fingertip_back
 //! finger = 0
@@ -26,14 +29,19 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::manipulation::TaskParams;
 use crate::sim::plant::{ObjectParams, PlantParams, Poke, Trajectory, FINGER_COUNT};
 
 /// The embedded scenarios: (name, TOML).
-pub const PRESETS: [(&str, &str); 4] = [
+pub const PRESETS: [(&str, &str); 8] = [
     ("disturbance", include_str!("scenarios/disturbance.toml")),
     ("grasp-hold", include_str!("scenarios/grasp-hold.toml")),
     ("slip", include_str!("scenarios/slip.toml")),
     ("no-object", include_str!("scenarios/no-object.toml")),
+    ("pour", include_str!("scenarios/pour.toml")),
+    ("rotate", include_str!("scenarios/rotate.toml")),
+    ("shake", include_str!("scenarios/shake.toml")),
+    ("twist", include_str!("scenarios/twist.toml")),
 ];
 
 /// The default scenario: the paper's disturbance experiment.
@@ -113,6 +121,9 @@ pub struct Scenario {
     /// External forces.
     #[serde(default, rename = "poke")]
     pub pokes: Vec<Poke>,
+    /// A manipulation task to run once the grasp is stable.
+    #[serde(default)]
+    pub task: Option<TaskParams>,
 }
 
 impl Scenario {
@@ -219,8 +230,26 @@ impl Scenario {
             ("plant.actuator_roll_mm_per_n", p.actuator_roll_mm_per_n),
             ("plant.back_load_coupling", p.back_load_coupling),
             ("plant.back_twist_mm_per_n", p.back_twist_mm_per_n),
+            ("plant.manip_deg_per_kpa", p.manip_deg_per_kpa),
+            (
+                "object.manip_creep_x_mm_per_deg",
+                o.manip_creep_x_mm_per_deg,
+            ),
         ] {
             non_negative(field, v)?;
+        }
+        for v in o.manip_roll_mm_per_deg {
+            if !(v.is_finite() && v.abs() <= 10.0) {
+                return Err(bad(
+                    "object.manip_roll_mm_per_deg",
+                    v.to_string(),
+                    "must be finite, |v| <= 10",
+                ));
+            }
+        }
+        if let Some(task) = &self.task {
+            task.validate()
+                .map_err(|(field, value, reason)| bad(field, value, reason))?;
         }
         let t = &self.trajectory;
         for (field, v) in [
