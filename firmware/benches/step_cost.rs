@@ -14,13 +14,12 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use dexitac_firmware::cost_scenario;
 use dexitac_firmware::tank_model::{TankModel, TankModelParams};
 use dexitac_firmware::{
     ByteQueue, Clock, Config, Controller, PressureSource, PumpOutputs, Pumps, TankReadings, Valves,
 };
-use dexitac_protocol::{
-    Chambers, EncodedFrame, HostMsg, PumpMode, ResetCause, ValveState, CHAMBER_COUNT,
-};
+use dexitac_protocol::{Chambers, EncodedFrame, HostMsg, ResetCause, ValveState, CHAMBER_COUNT};
 
 struct Rig {
     now_ms: u32,
@@ -73,19 +72,8 @@ fn setup() -> (Controller, Rig, ByteQueue<4096>, TankModel) {
         chambers: [ValveState::Hold; CHAMBER_COUNT],
     };
     let mut tx = ByteQueue::new();
-    let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
-    chambers[0] = ValveState::Inflate;
-    let setup = [
-        HostMsg::Arm,
-        HostMsg::SetPumps {
-            positive: PumpMode::Regulate,
-            negative: PumpMode::Regulate,
-        },
-        HostMsg::SetChambers { chambers },
-        HostMsg::SetTelemetryInterval { interval_ms: 10 },
-    ];
     ctl.tick(&mut rig, &mut tx);
-    for (seq, msg) in (1..).zip(setup) {
+    for (seq, msg) in (1..).zip(cost_scenario::setup_commands()) {
         ctl.receive(&frame(seq, msg), &rig, &mut tx);
     }
     (ctl, rig, tx, TankModel::new(TankModelParams::default()))

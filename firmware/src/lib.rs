@@ -69,6 +69,7 @@
 extern crate std;
 
 pub mod control;
+pub mod cost_scenario;
 pub mod queue;
 pub mod reset;
 pub mod sensor;

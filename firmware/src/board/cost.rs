@@ -17,7 +17,7 @@ use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::debug::{exit, EXIT_SUCCESS};
 use cortex_m_semihosting::hprintln;
 use dexitac_firmware::{Clock, Controller, FrameSink};
-use dexitac_protocol::{EncodedFrame, HostMsg, PumpMode, ValveState, CHAMBER_COUNT};
+use dexitac_protocol::{EncodedFrame, HostMsg};
 
 extern "C" {
     /// End of the statics (cortex-m-rt linker symbol), the stack's floor.
@@ -78,19 +78,8 @@ fn frame(seq: u16, msg: HostMsg) -> Option<EncodedFrame> {
 impl Meter {
     /// Sends the scenario's setup commands to `controller`.
     pub fn new(controller: &mut Controller, clock: &impl Clock, tx: &mut impl FrameSink) -> Meter {
-        let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
-        chambers[0] = ValveState::Inflate;
-        let setup = [
-            HostMsg::Arm,
-            HostMsg::SetPumps {
-                positive: PumpMode::Regulate,
-                negative: PumpMode::Regulate,
-            },
-            HostMsg::SetChambers { chambers },
-            HostMsg::SetTelemetryInterval { interval_ms: 10 },
-        ];
         let mut seq = 0;
-        for msg in setup {
+        for msg in dexitac_firmware::cost_scenario::setup_commands() {
             seq += 1;
             if let Some(f) = frame(seq, msg) {
                 controller.receive(&f, clock, tx);
