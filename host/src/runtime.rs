@@ -70,6 +70,7 @@ use dexitac_protocol::{
     CHAMBER_COUNT,
 };
 
+use crate::contact::Contact;
 use crate::frame::{FrameError, GreyFrame};
 use crate::grasp::{CentreMm, Command, Decision, Grasp, GraspParams, Observation, SENSOR_COUNT};
 use crate::link::{Link, LinkError, McuEvent, Port};
@@ -204,6 +205,9 @@ pub struct ControlConfig {
     /// A manipulation primitive to run once the grasp is stable and sealed
     /// (see [Manipulation](self#manipulation)).
     pub task: Option<TaskParams>,
+    /// Send each working frame with its [`RuntimeEvent::Observation`]
+    /// (for recording and the live view; costs one move per frame).
+    pub share_frames: bool,
 }
 
 impl Default for ControlConfig {
@@ -218,6 +222,7 @@ impl Default for ControlConfig {
             tactile_feedback: true,
             open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
             task: None,
+            share_frames: false,
         }
     }
 }
@@ -271,6 +276,11 @@ pub enum RuntimeEvent {
         markers: Arc<Vec<PointPx>>,
         /// Pipeline time, ms (wall clock).
         pipeline_ms: f64,
+        /// The contact in working px (centre, area, how it was found).
+        contact: Option<Contact>,
+        /// The working grey frame, when [`ControlConfig::share_frames`] is
+        /// set (recording, live view); `None` otherwise.
+        frame: Option<Arc<GreyFrame>>,
     },
     /// The grasp state machine decided.
     Decision {
@@ -326,6 +336,8 @@ enum SensorMsg {
         centre_mm: Option<CentreMm>,
         markers: Arc<Vec<PointPx>>,
         pipeline_ms: f64,
+        contact: Option<Contact>,
+        frame: Option<Arc<GreyFrame>>,
     },
     Failed {
         sensor: usize,
@@ -363,6 +375,7 @@ fn lower_thread_priority() {
 fn sensor_thread(
     sensor: usize,
     mut setup: Sensor,
+    share_frames: bool,
     clock: Clock,
     stop: &AtomicBool,
     tx: &Sender<SensorMsg>,
@@ -390,6 +403,8 @@ fn sensor_thread(
                 centre_mm: result.contact.map(|c| centre_mm(&setup.pipeline, c.centre)),
                 markers: Arc::new(result.markers.positions()),
                 pipeline_ms: result.times.total_ms,
+                contact: result.contact,
+                frame: share_frames.then(|| Arc::new(frame.frame)),
             },
             Err(e) => SensorMsg::Failed {
                 sensor,
@@ -627,6 +642,8 @@ impl<P: Port> Control<'_, P> {
                 centre_mm,
                 markers,
                 pipeline_ms,
+                contact,
+                frame,
             } => {
                 let _ = self.events.send(RuntimeEvent::Observation {
                     sensor,
@@ -634,6 +651,8 @@ impl<P: Port> Control<'_, P> {
                     centre_mm,
                     markers,
                     pipeline_ms,
+                    contact,
+                    frame,
                 });
                 let started = self.task_started();
                 if let Some(e) = self
@@ -765,7 +784,8 @@ pub fn run<P: Port>(
         for (i, sensor) in sensors.into_iter().enumerate() {
             let tx = tx.clone();
             let sensor_stop = &sensor_stop;
-            scope.spawn(move || sensor_thread(i, sensor, clock, sensor_stop, &tx));
+            let share = config.share_frames;
+            scope.spawn(move || sensor_thread(i, sensor, share, clock, sensor_stop, &tx));
         }
         drop(tx);
         let result = control.run(&rx, stop);

@@ -522,6 +522,7 @@ fn collect(rx: mpsc::Receiver<RuntimeEvent>, live: &Mutex<Live>) -> Collected {
                 centre_mm,
                 markers,
                 pipeline_ms,
+                ..
             } => {
                 if let Some(slot) = l.centres.get_mut(sensor) {
                     *slot = centre_mm;
