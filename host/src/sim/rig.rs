@@ -81,6 +81,11 @@ pub struct SimOptions {
     /// with unoptimised builds give the loop more, as the grasp logic, not
     /// the scheduler, is what they check (the silence trip has its own test).
     pub stall_tolerance_ms: u32,
+    /// Every event of the task loop is also sent here (recorder, live
+    /// view); a closed receiver is ignored.
+    pub event_tap: Option<mpsc::Sender<RuntimeEvent>>,
+    /// Attach the working frames to the observations (for the tap).
+    pub share_frames: bool,
 }
 
 impl Default for SimOptions {
@@ -93,6 +98,8 @@ impl Default for SimOptions {
             stop: Arc::new(AtomicBool::new(false)),
             line_error_rate: 0.0,
             stall_tolerance_ms: dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS,
+            event_tap: None,
+            share_frames: false,
         }
     }
 }
@@ -322,6 +329,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     let control = ControlConfig {
         tactile_feedback: options.tactile_feedback,
         task: scenario.task.clone(),
+        share_frames: options.share_frames,
         ..ControlConfig::default()
     };
     let params = Params::default();
@@ -398,7 +406,8 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
                 &finished,
             )
         });
-        let collector = scope.spawn(|| collect(rx, &live));
+        let tap = options.event_tap.clone();
+        let collector = scope.spawn(|| collect(rx, &live, tap));
         let result = runtime::run(&control, &mut link, sensors, clock, &stop, &tx);
         finished.store(true, Ordering::Relaxed);
         drop(tx);
@@ -511,9 +520,16 @@ struct Collected {
 }
 
 /// Gathers the loop's events; keeps the live view for the monitor.
-fn collect(rx: mpsc::Receiver<RuntimeEvent>, live: &Mutex<Live>) -> Collected {
+fn collect(
+    rx: mpsc::Receiver<RuntimeEvent>,
+    live: &Mutex<Live>,
+    tap: Option<mpsc::Sender<RuntimeEvent>>,
+) -> Collected {
     let mut c = Collected::default();
     for event in rx {
+        if let Some(tap) = &tap {
+            let _ = tap.send(event.clone());
+        }
         let mut l = live.lock().unwrap_or_else(|e| e.into_inner());
         match event {
             RuntimeEvent::Observation {
