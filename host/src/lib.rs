@@ -60,3 +60,6 @@ pub mod workspace;
 
 // Tactile-guarded manipulation primitives (issue 6, item 5).
 pub mod manipulation;
+
+// The live view: dashboard, window and PNG snapshots (issue 7, item 4).
+pub mod view;

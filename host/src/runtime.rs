@@ -363,7 +363,7 @@ const SENSOR_THREAD_NICE: i32 = 10;
 
 /// Lowers the calling thread's scheduling priority (Linux: per thread).
 /// Best effort: on failure the thread runs at the default priority.
-fn lower_thread_priority() {
+pub(crate) fn lower_thread_priority() {
     #[cfg(target_os = "linux")]
     // SAFETY: setpriority only reads its integer arguments; `who = 0` is
     // the calling thread on Linux.

@@ -413,8 +413,9 @@ impl Panel {
     }
 }
 
-/// A 3x5 pixel font for the plot's labels: digits, a few capitals and signs.
-fn glyph(c: char) -> [u8; 5] {
+/// A 3x5 pixel font for the plot's labels: digits, a few capitals and
+/// signs (also used by the live view, [`crate::view`]).
+pub(crate) fn glyph(c: char) -> [u8; 5] {
     // Each row: 3 bits, the leftmost pixel in bit 2.
     match c {
         '0' => [7, 5, 5, 5, 7],
@@ -457,12 +458,22 @@ fn glyph(c: char) -> [u8; 5] {
         'V' => [5, 5, 5, 5, 2],
         'W' => [5, 5, 7, 7, 5],
         'X' => [5, 5, 2, 5, 5],
+        'J' => [1, 1, 1, 5, 7],
+        'Q' => [7, 5, 5, 7, 1],
+        'Y' => [5, 5, 2, 2, 2],
+        'Z' => [7, 1, 2, 4, 7],
+        '%' => [5, 1, 2, 4, 5],
+        '=' => [0, 7, 0, 7, 0],
+        '>' => [4, 2, 1, 2, 4],
+        '<' => [1, 2, 4, 2, 1],
+        '_' => [0, 0, 0, 0, 7],
+        '|' => [2, 2, 2, 2, 2],
         _ => [0; 5],
     }
 }
 
 /// Draws `text` (upper case) with its top-left at (x, y), `scale` px per font pixel.
-fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) {
+pub(crate) fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) {
     for (i, ch) in text.chars().enumerate() {
         let rows = glyph(ch.to_ascii_uppercase());
         for (r, bits) in rows.iter().enumerate() {
@@ -484,13 +495,15 @@ fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) 
     }
 }
 
-fn put(img: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {
+/// Sets one pixel; points outside the image are ignored.
+pub(crate) fn put(img: &mut RgbImage, x: i64, y: i64, c: Rgb<u8>) {
     if x >= 0 && y >= 0 && (x as u32) < img.width() && (y as u32) < img.height() {
         img.put_pixel(x as u32, y as u32, c);
     }
 }
 
-fn line(img: &mut RgbImage, a: (i64, i64), b: (i64, i64), c: Rgb<u8>) {
+/// A 2 px thick line from `a` to `b` (Bresenham); clipped to the image.
+pub(crate) fn line(img: &mut RgbImage, a: (i64, i64), b: (i64, i64), c: Rgb<u8>) {
     let (mut x, mut y) = a;
     let dx = (b.0 - a.0).abs();
     let dy = -(b.1 - a.1).abs();
@@ -649,7 +662,7 @@ pub fn plot(r: &SimReport) -> RgbImage {
 }
 
 /// Colour of a density ratio (density / rest): dark red (0) -> white (1) -> blue (>1.3).
-fn ratio_colour(ratio: f64) -> Rgb<u8> {
+pub(crate) fn ratio_colour(ratio: f64) -> Rgb<u8> {
     if !ratio.is_finite() {
         return Rgb([60, 60, 60]);
     }
