@@ -200,7 +200,7 @@ struct DirSource {
     params: Params,
 }
 
-fn image_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
+pub(crate) fn image_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
         .filter_map(Result::ok)
@@ -221,7 +221,7 @@ fn image_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
     Ok(files)
 }
 
-fn load_frame(path: &Path, params: &Params) -> Result<GreyFrame, SourceError> {
+pub(crate) fn load_frame(path: &Path, params: &Params) -> Result<GreyFrame, SourceError> {
     let img = image::open(path)
         .map_err(|e| SourceError::Decode {
             path: path.to_path_buf(),

@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use dexitac::sim::output;
-use dexitac::sim::rig::{run_scenario, SimOptions};
+use dexitac::sim::rig::SimOptions;
 use dexitac::sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
 
 /// Arguments of `dexitac sim`.
@@ -37,6 +37,9 @@ pub struct SimArgs {
     /// List the preset scenarios and exit.
     #[arg(long)]
     list: bool,
+    /// Live view: window and PNG snapshots.
+    #[command(flatten)]
+    live: crate::cli_view::LiveArgs,
 }
 
 fn parse_speed(s: &str) -> Result<f64, String> {
@@ -92,7 +95,7 @@ pub fn run(args: &SimArgs) -> ExitCode {
         stall_tolerance_ms: args.host_silence_ms,
         ..SimOptions::default()
     };
-    let report = match run_scenario(&scenario, &options) {
+    let (report, view) = match crate::cli_view::run_sim(&scenario, options, &args.live) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("dexitac sim: {e}");
@@ -147,6 +150,7 @@ pub fn run(args: &SimArgs) -> ExitCode {
                 .map_or("never".to_string(), |t| format!("+{t:.3} s")),
         );
     }
+    view.wait();
     match &report.loop_result {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {

@@ -5,6 +5,7 @@ mod bench_cmd;
 mod cli_kinematics;
 mod cli_run;
 mod cli_sim;
+mod cli_view;
 mod synth_cmd;
 
 use std::path::PathBuf;
@@ -49,6 +50,9 @@ enum Command {
     /// Fit the linear pressure -> angle actuator model to measured
     /// `pressure_kpa,angle_deg` rows by least squares.
     FitActuator(cli_kinematics::FitArgs),
+    /// Live view of the tactile sensors without a board: frames ->
+    /// pipeline -> dashboard (window, or PNG snapshots with --headless).
+    View(cli_view::ViewArgs),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -102,6 +106,7 @@ fn main() -> ExitCode {
         Some(Command::FitActuator(args)) => {
             cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
         }
+        Some(Command::View(args)) => cli_view::run(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",

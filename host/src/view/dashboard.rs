@@ -26,7 +26,7 @@ use crate::frame::GreyFrame;
 use crate::grasp::{Cause, CentreMm, Command, Decision, GraspParams, SENSOR_COUNT};
 use crate::manipulation::{GuardTrip, TaskEvent};
 use crate::params::{DensityMode, Params};
-use crate::runtime::RuntimeEvent;
+use crate::runtime::{RuntimeEvent, StopReason};
 use crate::PointPx;
 
 /// Default strip-chart window, s.
@@ -393,7 +393,8 @@ impl Dashboard {
             RuntimeEvent::Stopped { t_ms, outcome, .. } => {
                 self.advance(*t_ms);
                 let (phase, text) = match outcome {
-                    Ok(reason) => (GraspPhase::Stopped, format!("{reason:?}")),
+                    Ok(StopReason::Requested) => (GraspPhase::Stopped, "STOP REQUESTED".into()),
+                    Ok(StopReason::FramesEnded) => (GraspPhase::Stopped, "FRAMES ENDED".into()),
                     Err(e) => (GraspPhase::Failed, e.clone()),
                 };
                 self.set_phase(*t_ms, phase);
@@ -407,7 +408,9 @@ impl Dashboard {
         self.now_ms = Some(self.now_ms.map_or(t_ms, |n| n.max(t_ms)));
     }
 
-    fn set_phase(&mut self, t_ms: u64, phase: GraspPhase) {
+    /// Sets the grasp phase from `t_ms` on (for callers that know it
+    /// without an event, e.g. `dexitac view` runs Algorithm 1 from t = 0).
+    pub fn set_phase(&mut self, t_ms: u64, phase: GraspPhase) {
         if self.phase() != phase {
             self.phases.push_back((t_ms, phase));
         }

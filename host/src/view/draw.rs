@@ -199,11 +199,10 @@ impl Dashboard {
                 text(img, panel.x + 8, panel.y + panel.h - 14, msg, 2, MUTED);
             }
         }
+        // One pixel per marker: the blob around it stays visible.
         for m in s.markers.iter() {
             if let Some((x, y)) = layout.to_panel(panel, size, *m) {
-                for (dx, dy) in [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)] {
-                    put_in(img, panel, x + dx, y + dy, MARKER_COLOUR);
-                }
+                put_in(img, panel, x, y, MARKER_COLOUR);
             }
         }
         self.draw_contact(img, layout, panel, s);
@@ -490,6 +489,10 @@ impl Dashboard {
                 }
             }
         }
+        if self.telemetry.is_empty() {
+            let lane = layout.lane(3);
+            text(img, lane.x + 8, lane.y, "NO TELEMETRY", 2, MUTED);
+        }
         chart.time_ticks(img, all);
         frame_rect(img, all, AXIS);
     }
@@ -707,14 +710,19 @@ fn line_in(img: &mut RgbImage, r: Rect, a: (i64, i64), b: (i64, i64), c: Rgb<u8>
     line(img, lift(a), lift(b), c);
 }
 
-/// Draws a grey frame into `inner` at `scale` (nearest neighbour).
+/// Draws a grey frame into `inner` at `scale`: each panel pixel is the
+/// mean of the 2 x 2 frame pixels at its top-left corner (a box filter at
+/// the usual half scale; no aliasing of the 3 px markers).
 fn blit_grey(img: &mut RgbImage, inner: Rect, scale: f64, frame: &crate::frame::GreyFrame) {
     let (fw, fh) = (frame.width(), frame.height());
     if fw == 0 || fh == 0 || scale <= 0.0 {
         return;
     }
-    let cols: Vec<usize> = (0..inner.w)
-        .map(|i| (((i as f64 + 0.5) / scale) as usize).min(fw - 1))
+    let cols: Vec<(usize, usize)> = (0..inner.w)
+        .map(|i| {
+            let x = ((i as f64 / scale) as usize).min(fw - 1);
+            (x, (x + 1).min(fw - 1))
+        })
         .collect();
     let width = img.width() as usize;
     let height = img.height() as i64;
@@ -725,13 +733,16 @@ fn blit_grey(img: &mut RgbImage, inner: Rect, scale: f64, frame: &crate::frame::
         if y < 0 || y >= height || inner.x < 0 {
             continue;
         }
-        let src_row = (((j as f64 + 0.5) / scale) as usize).min(fh - 1) * fw;
+        let sy = ((j as f64 / scale) as usize).min(fh - 1);
+        let (row0, row1) = (sy * fw, (sy + 1).min(fh - 1) * fw);
         let start = (y as usize * width + inner.x as usize) * 3;
         let Some(dst) = buf.get_mut(start..start + cols.len() * 3) else {
             continue;
         };
-        for (px, &col) in dst.chunks_exact_mut(3).zip(&cols) {
-            let g = data.get(src_row + col).copied().unwrap_or(0);
+        let at = |k: usize| u16::from(data.get(k).copied().unwrap_or(0));
+        for (px, &(x0, x1)) in dst.chunks_exact_mut(3).zip(&cols) {
+            let sum = at(row0 + x0) + at(row0 + x1) + at(row1 + x0) + at(row1 + x1);
+            let g = ((sum + 2) / 4) as u8;
             px.copy_from_slice(&[g, g, g]);
         }
     }

@@ -3,11 +3,11 @@
 //! snapshots written as their time comes. Runs on the thread that owns the
 //! window.
 //!
-//! It ends when the channel closes (the run ended), or when the user closes
-//! the window (Esc, q, the close button): it then sets the `stop` flag, which
-//! ends the run safely (the task loop seals the valves and disarms). With
-//! [`LiveOptions::keep_open`] the window stays up after the run ended, with
-//! its last picture, until the user closes it or `stop` is set (Ctrl-C).
+//! It ends when the channel closes (the run ended): the window is handed
+//! back, still open, for [`linger`] (the last picture stays up until the
+//! user closes it); or when the user closes the window (Esc, q, the close
+//! button): it then sets the `stop` flag, which ends the run safely (the
+//! task loop seals the valves and disarms).
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,12 +30,8 @@ pub struct LiveOptions {
     pub snapshots: Option<Snapshots>,
     /// Most redraws per second of the window.
     pub fps: f64,
-    /// Set when the user closes the window; read to leave a kept-open window.
+    /// Set when the user closes the window.
     pub stop: Arc<AtomicBool>,
-    /// Keep the window open after the events ended, until it is closed.
-    pub keep_open: bool,
-    /// The window's title.
-    pub title: String,
     /// Lower the calling thread's priority first (the rig's control loop
     /// keeps its deadlines while the view draws); threads it spawns later
     /// inherit it.
@@ -57,6 +53,15 @@ pub struct LiveSummary {
     pub closed_by_user: bool,
     /// Snapshot files written.
     pub snapshots: Vec<PathBuf>,
+}
+
+/// What [`run`] hands back.
+#[derive(Debug)]
+pub struct LiveEnd {
+    /// What it did.
+    pub summary: LiveSummary,
+    /// The window, still open, when the events ended first.
+    pub window: Option<ViewWindow>,
 }
 
 /// Render timing.
@@ -102,7 +107,7 @@ pub fn run(
     rx: &Receiver<RuntimeEvent>,
     dashboard: &mut Dashboard,
     options: LiveOptions,
-) -> Result<LiveSummary, ViewError> {
+) -> Result<LiveEnd, ViewError> {
     if options.lower_priority {
         crate::runtime::lower_thread_priority();
     }
@@ -111,8 +116,6 @@ pub fn run(
         mut snapshots,
         fps,
         stop,
-        keep_open,
-        title,
         ..
     } = options;
     let mut timing = Timing::default();
@@ -124,33 +127,23 @@ pub fn run(
             }
         }
         Some(window) => {
-            let fps = if fps.is_finite() {
-                fps.clamp(1.0, 120.0)
-            } else {
-                30.0
-            };
-            let period = Duration::from_secs_f64(1.0 / fps);
+            let period = frame_period(fps);
             let mut next_frame = Instant::now();
-            let mut ended = false;
             let mut dirty = true;
             loop {
-                if ended {
-                    std::thread::sleep(next_frame.saturating_duration_since(Instant::now()));
-                } else {
-                    let wait = next_frame.saturating_duration_since(Instant::now());
-                    match rx.recv_timeout(wait) {
-                        Ok(event) => {
+                let wait = next_frame.saturating_duration_since(Instant::now());
+                match rx.recv_timeout(wait) {
+                    Ok(event) => {
+                        handle(&event, dashboard, &mut snapshots, &mut timing)?;
+                        dirty = true;
+                        for event in rx.try_iter().take(MAX_EVENTS_PER_PASS) {
                             handle(&event, dashboard, &mut snapshots, &mut timing)?;
-                            dirty = true;
-                            for event in rx.try_iter().take(MAX_EVENTS_PER_PASS) {
-                                handle(&event, dashboard, &mut snapshots, &mut timing)?;
-                            }
                         }
-                        Err(RecvTimeoutError::Timeout) => {}
-                        Err(RecvTimeoutError::Disconnected) => {
-                            ended = true;
-                            window.set_title(&format!("{title} - finished: Esc or q to close"));
-                        }
+                    }
+                    Err(RecvTimeoutError::Timeout) => {}
+                    Err(RecvTimeoutError::Disconnected) => {
+                        window.show(&timing.render(dashboard))?;
+                        break;
                     }
                 }
                 let now = Instant::now();
@@ -164,13 +157,10 @@ pub fn run(
                         window.poll();
                     }
                     if window.close_requested() {
-                        closed_by_user = !ended;
+                        closed_by_user = true;
                         stop.store(true, Ordering::Relaxed);
                         break;
                     }
-                }
-                if ended && (!keep_open || stop.load(Ordering::Relaxed)) {
-                    break;
                 }
             }
         }
@@ -181,7 +171,7 @@ pub fn run(
             s.save(&img, dashboard.now_ms().unwrap_or(0))?;
         }
     }
-    Ok(LiveSummary {
+    let summary = LiveSummary {
         events: dashboard.events(),
         renders: timing.renders,
         render_ms_mean: if timing.renders > 0 {
@@ -192,5 +182,29 @@ pub fn run(
         render_ms_max: timing.max_ms,
         closed_by_user,
         snapshots: snapshots.map(|s| s.written().to_vec()).unwrap_or_default(),
+    };
+    Ok(LiveEnd {
+        summary,
+        window: window.filter(|_| !closed_by_user),
     })
+}
+
+fn frame_period(fps: f64) -> Duration {
+    let fps = if fps.is_finite() {
+        fps.clamp(1.0, 120.0)
+    } else {
+        30.0
+    };
+    Duration::from_secs_f64(1.0 / fps)
+}
+
+/// Keeps `window` open with its last picture until the user closes it or
+/// `stop` is set (Ctrl-C).
+pub fn linger(mut window: ViewWindow, title: &str, stop: &AtomicBool) {
+    window.set_title(&format!("{title} - finished: Esc or q to close"));
+    let period = frame_period(30.0);
+    while !window.close_requested() && !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(period);
+        window.poll();
+    }
 }

@@ -41,7 +41,7 @@ pub mod window;
 
 pub use dashboard::{Dashboard, DashboardConfig, GraspPhase};
 pub use layout::Layout;
-pub use live::{LiveOptions, LiveSummary};
+pub use live::{LiveEnd, LiveOptions, LiveSummary};
 pub use snapshot::Snapshots;
 pub use window::ViewWindow;
 
