@@ -29,6 +29,7 @@ use dexitac::frame::GreyFrame;
 use dexitac::grasp::{Grasp, Observation};
 use dexitac::params::Params;
 use dexitac::pipeline::Pipeline;
+use dexitac::protocol::{ArmState, ValveState};
 use dexitac::runtime::{self, Clock, RuntimeEvent, StopReason};
 use dexitac::sim::plant::ContactState;
 use dexitac::sim::render::Renderer;
@@ -237,8 +238,16 @@ pub fn run_sim(
         let end = end.map_err(|e| format!("live view: {e}"))?;
         print_summary("sim", &end.summary);
         if end.summary.closed_by_user {
+            let mcu = &report.mcu_at_end;
+            let safe = mcu.state == ArmState::Disarmed
+                && mcu.chambers.iter().all(|v| *v == ValveState::Hold);
             eprintln!(
-                "dexitac sim: the live view was closed: run stopped (valves sealed, MCU disarmed)"
+                "dexitac sim: the live view was closed, the run stopped: {}",
+                if safe {
+                    "valves sealed, MCU disarmed"
+                } else {
+                    "WARNING: the simulated MCU did not end sealed and disarmed"
+                }
             );
         }
         Ok((

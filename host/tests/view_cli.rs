@@ -165,9 +165,7 @@ impl Drop for Xvfb {
 }
 
 fn start_xvfb() -> Option<Xvfb> {
-    let found = std::env::var_os("PATH")
-        .is_some_and(|p| std::env::split_paths(&p).any(|d| d.join("Xvfb").is_file()));
-    if !found {
+    if !on_path("Xvfb") {
         eprintln!("skipped: Xvfb is not installed (apt-get install xvfb to run this test)");
         return None;
     }
@@ -198,22 +196,26 @@ fn start_xvfb() -> Option<Xvfb> {
 fn real_window_under_xvfb_shows_the_run_and_closes_on_ctrl_c() {
     let Some(x) = start_xvfb() else { return };
     let dir = tempfile::tempdir().unwrap();
-    let mut child = dexitac()
+    let snaps = dir.path().join("snaps");
+    let log = dir.path().join("stderr.txt");
+    let child = dexitac()
         .env("DISPLAY", &x.display)
         .args(["view", "--render", "--duration-s", "2"])
-        .args(["--snapshot", dir.path().to_str().unwrap()])
-        .stderr(Stdio::piped())
+        .args(["--snapshot", snaps.to_str().unwrap()])
+        .stderr(std::fs::File::create(&log).unwrap())
         .spawn()
         .unwrap();
+    let mut guard = Killed(child);
+    let child = &mut guard.0;
     // The frames end after 2 s; the window then lingers until Ctrl-C.
     let deadline = Instant::now() + Duration::from_secs(60);
-    while pngs(dir.path()).is_empty() && Instant::now() < deadline {
+    while pngs(&snaps).is_empty() && Instant::now() < deadline {
         if let Ok(Some(status)) = child.try_wait() {
             panic!("dexitac view exited early: {status}");
         }
         std::thread::sleep(Duration::from_millis(100));
     }
-    assert!(!pngs(dir.path()).is_empty(), "no snapshot within 60 s");
+    assert!(!pngs(&snaps).is_empty(), "no snapshot within 60 s");
     std::thread::sleep(Duration::from_millis(500));
     assert!(
         child.try_wait().unwrap().is_none(),
@@ -223,9 +225,84 @@ fn real_window_under_xvfb_shows_the_run_and_closes_on_ctrl_c() {
     unsafe {
         libc::kill(child.id() as i32, libc::SIGINT);
     }
-    let o = child.wait_with_output().unwrap();
-    let e = stderr(&o);
-    assert!(o.status.success(), "{e}");
+    let status = child.wait().unwrap();
+    let e = std::fs::read_to_string(&log).unwrap();
+    assert!(status.success(), "{e}");
     // The window drew frames (not just the snapshots).
     assert!(e.contains("live view drew"), "{e}");
+}
+
+fn on_path(program: &str) -> bool {
+    std::env::var_os("PATH")
+        .is_some_and(|p| std::env::split_paths(&p).any(|d| d.join(program).is_file()))
+}
+
+#[test]
+fn closing_the_sim_window_stops_the_run_safely() {
+    if !on_path("xdotool") {
+        eprintln!("skipped: xdotool is not installed (it presses Esc in the window)");
+        return;
+    }
+    let Some(x) = start_xvfb() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("long.toml");
+    std::fs::write(&scenario, "name = \"view-long\"\nduration_s = 120.0\n").unwrap();
+    let out = dir.path().join("out");
+    // stderr to a file: the status line would fill a pipe nobody reads.
+    let log = dir.path().join("stderr.txt");
+    let child = dexitac()
+        .env("DISPLAY", &x.display)
+        .args(["sim", "--view", "--host-silence-ms", "10000"])
+        .args(["--scenario", scenario.to_str().unwrap()])
+        .args(["--out", out.to_str().unwrap()])
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    let mut child = Killed(child);
+    let started = Instant::now();
+    let xdotool = |args: &[&str]| {
+        Command::new("xdotool")
+            .env("DISPLAY", &x.display)
+            .args(args)
+            .output()
+            .unwrap()
+    };
+    std::thread::sleep(Duration::from_secs(3));
+    // Press Esc in the window until the process ends (key events can be
+    // lost while the window maps; there is no window manager).
+    let status = loop {
+        if let Some(status) = child.0.try_wait().unwrap() {
+            break status;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(90),
+            "still running: {}",
+            std::fs::read_to_string(&log).unwrap_or_default()
+        );
+        let found = xdotool(&["search", "--name", "dexitac sim"]);
+        if let Some(id) = String::from_utf8_lossy(&found.stdout).lines().next() {
+            xdotool(&["windowfocus", id]);
+            xdotool(&["key", "--window", id, "Escape"]);
+        }
+        std::thread::sleep(Duration::from_secs(1));
+    };
+    let e = std::fs::read_to_string(&log).unwrap();
+    assert!(status.success(), "{e}");
+    assert!(
+        e.contains("the run stopped: valves sealed, MCU disarmed"),
+        "{e}"
+    );
+    // Stopped long before the scenario's 120 s, with its results written.
+    assert!(started.elapsed() < Duration::from_secs(90));
+    assert!(out.join("summary.json").exists());
+}
+
+/// A child process killed on drop (a failed test leaves nothing running).
+struct Killed(std::process::Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
 }
