@@ -364,7 +364,8 @@ fn view_sensors(args: &ViewArgs, params: &Params) -> Result<Vec<ViewSensor>, Str
 }
 
 /// Frames -> pipeline -> events, Algorithm 1 on the observations. Frame
-/// `k` is at `k / fps` s; `paced`: at that wall-clock time too.
+/// `k` is at `k / fps` s; `paced`: at that wall-clock time too. Returns why
+/// the frames failed, if they did.
 #[allow(clippy::too_many_arguments)]
 fn produce(
     mut sensors: Vec<ViewSensor>,
@@ -374,7 +375,7 @@ fn produce(
     paced: bool,
     stop: &AtomicBool,
     tx: &Sender<RuntimeEvent>,
-) {
+) -> Option<String> {
     let clock = Clock::wall();
     let mut grasp = Grasp::new(Default::default());
     grasp.start(0);
@@ -414,11 +415,11 @@ fn produce(
                 frame: Some(Arc::new(frame)),
             };
             if tx.send(event).is_err() {
-                return;
+                return None;
             }
             if let Some(decision) = grasp.observe(sensor, Observation { t_ms, centre_mm }) {
                 if tx.send(RuntimeEvent::Decision { t_ms, decision }).is_err() {
-                    return;
+                    return None;
                 }
             }
         }
@@ -427,19 +428,24 @@ fn produce(
         }
         if let Some(decision) = grasp.tick(t_ms) {
             if tx.send(RuntimeEvent::Decision { t_ms, decision }).is_err() {
-                return;
+                return None;
             }
         }
         t_ms += period_ms;
     };
+    let failure = outcome.as_ref().err().cloned();
+    // The view may have closed already.
     let _ = tx.send(RuntimeEvent::Stopped {
         t_ms,
         max_loop_gap: Duration::ZERO,
         outcome,
     });
+    failure
 }
 
-fn run_view(args: &ViewArgs) -> Result<(), String> {
+/// Runs the view; `Ok(false)` when a frame could not be read or processed
+/// (reported on stderr).
+fn run_view(args: &ViewArgs) -> Result<bool, String> {
     let params = match &args.config {
         Some(path) => Params::load(path).map_err(|e| e.to_string())?,
         None => Params::default(),
@@ -479,10 +485,10 @@ fn run_view(args: &ViewArgs) -> Result<(), String> {
     crate::cli_sim::stop_on_ctrl_c(&stop);
     let paced = window.is_some();
     let (tx, rx) = mpsc::channel();
-    let end = std::thread::scope(|scope| {
+    let (end, failure) = std::thread::scope(|scope| {
         let producer_stop = Arc::clone(&stop);
         let params = &params;
-        scope.spawn(move || {
+        let producer = scope.spawn(move || {
             produce(
                 sensors,
                 params,
@@ -508,21 +514,28 @@ fn run_view(args: &ViewArgs) -> Result<(), String> {
             stop.store(true, Ordering::Relaxed);
         }
         drop(rx);
-        end
-    })
-    .map_err(|e| format!("live view: {e}"))?;
+        let failure = producer
+            .join()
+            .unwrap_or_else(|_| Some("the frame thread panicked".into()));
+        (end, failure)
+    });
+    let end = end.map_err(|e| format!("live view: {e}"))?;
     print_summary("view", &end.summary);
+    if let Some(f) = &failure {
+        eprintln!("dexitac view: {f}");
+    }
     if let Some(w) = end.window {
         eprintln!("dexitac view: the frames ended; Esc or q closes the window");
         live::linger(w, &title, &stop);
     }
-    Ok(())
+    Ok(failure.is_none())
 }
 
 /// Runs `dexitac view`.
 pub fn run(args: &ViewArgs) -> ExitCode {
     match run_view(args) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
         Err(msg) => {
             eprintln!("dexitac view: {msg}");
             ExitCode::from(2)

@@ -149,6 +149,28 @@ fn bad_view_arguments_are_refused() {
         .unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(stderr(&o).contains("rest frame"), "{}", stderr(&o));
+    // A frame that is not an image: reported, exit 1, the snapshots written.
+    let frames = dir.path().join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let sensor = dexitac::synth::Category::Nominal.sensor(640, 480, 1);
+    let rest = dexitac::synth::rest_frame(&sensor, 2).image;
+    image::GrayImage::from_raw(640, 480, rest.data().to_vec())
+        .unwrap()
+        .save(frames.join("0_rest.png"))
+        .unwrap();
+    std::fs::write(frames.join("1_broken.png"), b"not a png").unwrap();
+    let snaps = dir.path().join("snaps");
+    let o = dexitac()
+        .env_remove("DISPLAY")
+        .args(["view", "--headless", "--snapshot", snaps.to_str().unwrap()])
+        .args(["--frames", frames.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let e = stderr(&o);
+    assert_eq!(o.status.code(), Some(1), "{e}");
+    assert!(e.contains("1_broken.png") && !e.contains("panicked"), "{e}");
+    // The view still wrote its final picture (the run FAILED on it).
+    assert_eq!(pngs(&snaps).len(), 1, "{e}");
 }
 
 /// An Xvfb server on a free display, killed on drop.
@@ -255,6 +277,7 @@ fn closing_the_sim_window_stops_the_run_safely() {
         .args(["sim", "--view", "--host-silence-ms", "10000"])
         .args(["--scenario", scenario.to_str().unwrap()])
         .args(["--out", out.to_str().unwrap()])
+        .stdout(Stdio::null())
         .stderr(std::fs::File::create(&log).unwrap())
         .spawn()
         .unwrap();
