@@ -458,7 +458,7 @@ impl Dashboard {
         contact: Option<Contact>,
         frame: Option<&Arc<GreyFrame>>,
     ) {
-        let params = self.config.params.clone();
+        let params = &self.config.params;
         let Some(s) = self.sensors.get_mut(sensor) else {
             return;
         };
@@ -482,7 +482,7 @@ impl Dashboard {
                 params.frame.work_width_px as usize,
                 params.frame.work_height_px as usize,
             ));
-            s.rest = Some(RestRef::from_markers(markers, w, h, &params));
+            s.rest = Some(RestRef::from_markers(markers, w, h, params));
         }
         let contact = contact.filter(|c| c.centre.is_finite() && c.area_mm2.is_finite());
         let centre_mm = centre_mm.filter(|c| c.x_mm.is_finite() && c.y_mm.is_finite());
