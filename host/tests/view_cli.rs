@@ -6,6 +6,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use dexitac::view::draw::{INFLATE_COLOUR, NO_FRAME, POSITIVE_TANK_COLOUR};
+use dexitac::view::layout::Rect;
+use dexitac::view::Layout;
+
 fn dexitac() -> Command {
     Command::new(env!("CARGO_BIN_EXE_dexitac"))
 }
@@ -52,10 +56,24 @@ fn sim_writes_dashboard_snapshots_headless() {
     assert!(first.starts_with("view_0001."), "{first}");
     let last = image::open(files.last().unwrap()).unwrap().into_rgb8();
     assert_eq!(last.dimensions(), (1280, 720));
-    // By the end the tanks were charged and the fingers closed: the
-    // positive tank lane is not empty, and the frame panels show frames.
+    // By the end the tanks were charged and the fingers closing: the frame
+    // panels show frames, the positive tank has a curve, and chamber 0's
+    // lane (a grasping chamber) shows the inflation the MCU reported.
+    let layout = Layout;
     let frame_px = *last.get_pixel(10, 40);
-    assert_ne!(frame_px, image::Rgb([28, 28, 34]), "no frame drawn");
+    assert_ne!(frame_px, NO_FRAME, "no frame drawn");
+    let has = |r: Rect, c: image::Rgb<u8>| {
+        (r.y..r.y + r.h).any(|y| (r.x..r.x + r.w).any(|x| *last.get_pixel(x as u32, y as u32) == c))
+    };
+    assert!(has(layout.pressure_chart(), POSITIVE_TANK_COLOUR));
+    assert!(
+        has(layout.lane(1), INFLATE_COLOUR),
+        "chamber 0 never inflated"
+    );
+    assert!(
+        !has(layout.lane(3), INFLATE_COLOUR),
+        "chamber 2 is not a grasping chamber"
+    );
     // The run's own outputs are still written.
     assert!(out.join("summary.json").exists());
     assert!(stderr(&o).contains("snapshot(s)"), "{}", stderr(&o));
