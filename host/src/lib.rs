@@ -60,3 +60,6 @@ pub mod workspace;
 
 // Tactile-guarded manipulation primitives (issue 6, item 5).
 pub mod manipulation;
+
+// Recording and replay in MCAP (issue 7, items 2b and 3).
+pub mod recording;
