@@ -69,6 +69,8 @@ pub struct RunArgs {
     /// Use the simulator's camera (a steady contact) instead of --frames.
     #[arg(long, conflicts_with = "frames")]
     render: bool,
+    #[command(flatten)]
+    record: crate::cli_record::RecordFlags,
 }
 
 #[derive(Debug, Deserialize)]
@@ -273,59 +275,89 @@ impl FrameSource for SteadySource {
     }
 }
 
-fn sensors(args: &RunArgs, params: &Params) -> Result<Vec<Sensor>, String> {
-    let period_ms = if args.fps.is_finite() && args.fps > 0.1 && args.fps <= 1_000.0 {
-        (1e3 / args.fps) as u64
+/// `--fps` as a frame period, ms.
+pub(crate) fn period_ms(fps: f64) -> Result<u64, String> {
+    if fps.is_finite() && fps > 0.1 && fps <= 1_000.0 {
+        Ok((1e3 / fps) as u64)
     } else {
-        return Err("--fps must lie in 0.1..=1000".into());
+        Err("--fps must lie in 0.1..=1000".into())
+    }
+}
+
+/// The simulator's camera for `finger` with a steady contact, and the rest
+/// frames to calibrate on.
+pub(crate) fn steady_source(
+    finger: usize,
+    params: &Params,
+    period_ms: u64,
+) -> (Box<dyn FrameSource>, Vec<GreyFrame>) {
+    let mut renderer = Renderer::new(
+        SensorSpec::nominal(640, 480),
+        params.frame.mm_per_px,
+        finger as u64 + 1,
+    );
+    let rest = vec![renderer.render(None), renderer.render(None)];
+    let source = SteadySource {
+        renderer,
+        contact: ContactState {
+            centre_mm: [0.0, 0.0],
+            shear_mm: [0.0, 0.0],
+            normal_n: 1.5,
+            width_mm: 2.5,
+        },
+        period_ms,
+        next_ms: 0,
     };
-    let mut out = Vec::new();
+    (Box::new(source), rest)
+}
+
+/// The frames of `dir` (the first is the rest frame, returned apart).
+pub(crate) fn dir_source(
+    dir: &Path,
+    params: &Params,
+    period_ms: u64,
+) -> Result<(Box<dyn FrameSource>, GreyFrame), String> {
+    let files = image_files(dir)?;
+    let rest = load_frame(&files[0], params).map_err(|e| e.to_string())?;
+    let source = DirSource {
+        files: files[1..].to_vec(),
+        next: 0,
+        period_ms,
+        next_ms: 0,
+        params: params.clone(),
+    };
+    Ok((Box::new(source), rest))
+}
+
+/// The sensors and the rest frames each was calibrated on.
+fn sensors(args: &RunArgs, params: &Params) -> Result<(Vec<Sensor>, Vec<Vec<GreyFrame>>), String> {
+    let period_ms = period_ms(args.fps)?;
+    let mut sources = Vec::new();
     if args.render {
         for finger in 0..2 {
-            let mut renderer = Renderer::new(
-                SensorSpec::nominal(640, 480),
-                params.frame.mm_per_px,
-                finger as u64 + 1,
-            );
-            let rest = [renderer.render(None), renderer.render(None)];
-            let cal = calibrate::calibrate(&rest, params).map_err(|e| e.to_string())?;
-            out.push(Sensor {
-                source: Box::new(SteadySource {
-                    renderer,
-                    contact: ContactState {
-                        centre_mm: [0.0, 0.0],
-                        shear_mm: [0.0, 0.0],
-                        normal_n: 1.5,
-                        width_mm: 2.5,
-                    },
-                    period_ms,
-                    next_ms: 0,
-                }),
-                pipeline: Pipeline::new(cal, params.clone()),
-            });
+            let (source, rest) = steady_source(finger, params, period_ms);
+            sources.push((source, rest, format!("simulated sensor {finger}")));
         }
-        return Ok(out);
-    }
-    if args.frames.len() != 2 {
+    } else if args.frames.len() != 2 {
         return Err("give --frames twice (one directory per fingertip) or --render".into());
+    } else {
+        for dir in &args.frames {
+            let (source, rest) = dir_source(dir, params, period_ms)?;
+            sources.push((source, vec![rest], format!("{}", dir.display())));
+        }
     }
-    for dir in &args.frames {
-        let files = image_files(dir)?;
-        let rest = load_frame(&files[0], params).map_err(|e| e.to_string())?;
-        let cal = calibrate::calibrate(&[rest], params)
-            .map_err(|e| format!("{}: {e}", files[0].display()))?;
+    let mut out = Vec::new();
+    let mut rests = Vec::new();
+    for (source, rest, label) in sources {
+        let cal =
+            calibrate::calibrate(&rest, params).map_err(|e| format!("{label}: rest frame: {e}"))?;
         out.push(Sensor {
-            source: Box::new(DirSource {
-                files: files[1..].to_vec(),
-                next: 0,
-                period_ms,
-                next_ms: 0,
-                params: params.clone(),
-            }),
+            source,
             pipeline: Pipeline::new(cal, params.clone()),
         });
+        rests.push(rest);
     }
-    Ok(out)
+    Ok((out, rests))
 }
 
 fn run_inner(args: &RunArgs) -> Result<(), String> {
@@ -334,8 +366,11 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         Some(path) => Params::load(path).map_err(|e| e.to_string())?,
         None => Params::default(),
     };
-    let control = config.control()?;
-    let sensors = sensors(args, &params)?;
+    let control = ControlConfig {
+        share_frames: args.record.record_frames,
+        ..config.control()?
+    };
+    let (sensors, rests) = sensors(args, &params)?;
     let link_config = LinkConfig {
         baud: config.baud,
         ..LinkConfig::default()
@@ -343,9 +378,22 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
     let mut link = Link::open(&args.port, link_config).map_err(|e| e.to_string())?;
     let stop = Arc::new(AtomicBool::new(false));
     crate::cli_sim::stop_on_ctrl_c(&stop);
-    let (tx, rx) = mpsc::channel();
+    let recorder = crate::cli_record::start_recorder(
+        &args.record,
+        "run",
+        &format!("dexitac run --port {}", args.port.display()),
+        &rests,
+        config.sensor_config.as_deref(),
+        &params,
+    )?;
+    let tap = recorder.as_ref().map(|r| r.sender());
+    let (tx, rx) = mpsc::channel::<RuntimeEvent>();
     let printer = std::thread::spawn(move || {
         for event in rx {
+            if let Some(tap) = &tap {
+                // A failed recorder reports its error when finished.
+                let _ = tap.send(event.clone());
+            }
             match event {
                 RuntimeEvent::CommandSent {
                     t_ms, msg, reason, ..
@@ -375,7 +423,9 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
     if printer.join().is_err() {
         eprintln!("dexitac run: the event printer failed");
     }
-    result.map(|_| ()).map_err(|e| e.to_string())
+    let recorded = crate::cli_record::finish_recorder(recorder, &args.record);
+    result.map_err(|e| e.to_string())?;
+    recorded
 }
 
 /// Runs the subcommand.

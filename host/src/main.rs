@@ -3,6 +3,7 @@
 mod analyze;
 mod bench_cmd;
 mod cli_kinematics;
+mod cli_record;
 mod cli_run;
 mod cli_sim;
 mod synth_cmd;
@@ -49,6 +50,12 @@ enum Command {
     /// Fit the linear pressure -> angle actuator model to measured
     /// `pressure_kpa,angle_deg` rows by least squares.
     FitActuator(cli_kinematics::FitArgs),
+    /// Record the fingertips without a board: frames -> pipeline -> MCAP
+    /// (frames, markers, contact centres; see host/RECORDING.md).
+    Record(cli_record::RecordArgs),
+    /// Run the pipeline again over a recording's frames and compare the
+    /// contact centres with the recorded ones (exit 1 when they differ).
+    Replay(cli_record::ReplayArgs),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -102,6 +109,8 @@ fn main() -> ExitCode {
         Some(Command::FitActuator(args)) => {
             cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
         }
+        Some(Command::Record(args)) => cli_record::run_record(&args),
+        Some(Command::Replay(args)) => cli_record::run_replay(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",
