@@ -14,7 +14,9 @@ use dexitac::frame::GreyFrame;
 use dexitac::params::Params;
 use dexitac::pipeline::Pipeline;
 use dexitac::recording::replay::{self, Replay};
-use dexitac::recording::{RecordOptions, RecordStats, Recorder, RecorderThread, Recording};
+use dexitac::recording::{
+    ReadError, RecordOptions, RecordStats, Recorder, RecorderThread, Recording,
+};
 use dexitac::runtime::{self, Clock, FrameSource, RuntimeEvent};
 
 /// The recording flags of `dexitac sim` and `dexitac run`.
@@ -399,7 +401,10 @@ fn replay_inner(args: &ReplayArgs) -> Result<bool, String> {
     if !(args.tolerance_px.is_finite() && args.tolerance_px >= 0.0) {
         return Err("--tolerance-px must be >= 0".into());
     }
-    let recording = Recording::open(&args.file, args.recover).map_err(|e| e.to_string())?;
+    let recording = Recording::open(&args.file, args.recover).map_err(|e| match e {
+        ReadError::Damaged { .. } => format!("{e} (replay them with --recover)"),
+        e => e.to_string(),
+    })?;
     if let Some(damage) = &recording.damage {
         eprintln!("dexitac replay: warning: {damage}");
     }

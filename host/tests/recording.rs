@@ -73,7 +73,7 @@ fn a_recorded_sim_run_is_readable_by_the_mcap_reader_and_replays_exactly() {
             .unwrap_or(0);
         counts.insert(channel.topic.clone(), (schema, n));
     }
-    for (_, s) in &summary.schemas {
+    for s in summary.schemas.values() {
         assert_eq!(s.encoding, "jsonschema", "{}", s.name);
         let _: serde_json::Value = serde_json::from_slice(&s.data).expect("schema is JSON");
     }
@@ -145,7 +145,7 @@ fn frame_dir(dir: &Path, seed: u64, n: usize) {
     std::fs::create_dir_all(dir).unwrap();
     let mut r = Renderer::new(SensorSpec::nominal(640, 480), 0.1, seed);
     for i in 0..=n {
-        let contact = (i > 0).then(|| ContactState {
+        let contact = (i > 0).then_some(ContactState {
             centre_mm: [0.4 * i as f64, 0.5],
             shear_mm: [0.0, 0.0],
             normal_n: 1.5,

@@ -44,7 +44,9 @@ pub use messages::{
     TelemetryMsg, Time,
 };
 pub use reader::{ReadError, RecordedFrame, Recording, ReplaySource, TopicInfo};
-pub use writer::{RecordError, RecordOptions, RecordStats, Recorder, RecorderThread};
+pub use writer::{
+    ObservationRef, RecordError, RecordOptions, RecordStats, Recorder, RecorderThread,
+};
 
 /// The topics of a recording (`{i}`: sensor index).
 pub mod topic {

@@ -35,7 +35,7 @@ pub enum ReadError {
     /// The file is damaged or was not finished (truncated, killed writer).
     #[error(
         "{path} is damaged or unfinished: {reason}; {messages} message(s) before the damage are \
-         readable (recover them with --recover)"
+         readable"
     )]
     Damaged {
         /// The file.
@@ -144,7 +144,8 @@ fn json<T: DeserializeOwned>(
 impl Recording {
     /// Reads `path`. A damaged or unfinished file is an error unless
     /// `recover` is set; then the messages before the damage are kept (see
-    /// [the module docs](super#damaged-files)).
+    /// [the module docs](super#damaged-files)). The whole file is read into
+    /// memory (frames stay PNG-encoded until used).
     pub fn open(path: &Path, recover: bool) -> Result<Recording, ReadError> {
         let bytes = std::fs::read(path).map_err(|source| ReadError::Io {
             path: path.to_path_buf(),
