@@ -1,22 +1,34 @@
 //! Recording and replay end to end: a short simulated run recorded through
 //! the sim's event tap and read by the `mcap` crate's own reader; `dexitac
 //! record` over a folder of frames, `dexitac replay` on it, and on a
-//! truncated copy.
+//! truncated copy; `dexitac run --record` on a simulated board, stopped by
+//! Ctrl-C and killed.
 
 use std::collections::BTreeMap;
-use std::path::Path;
-use std::process::{Command, Output};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 use dexitac::params::Params;
-use dexitac::recording::{replay, topic, RecordOptions, Recorder, Recording};
+use dexitac::recording::{replay, topic, ReadError, RecordOptions, Recorder, Recording};
+use dexitac::sim::mcu::{SimMcu, SimMcuConfig};
 use dexitac::sim::plant::{ContactState, FINGER_COUNT};
 use dexitac::sim::render::Renderer;
 use dexitac::sim::rig::{self, run_scenario, SimOptions};
 use dexitac::sim::scenario::Scenario;
 use dexitac::synth::SensorSpec;
+use dexitac_protocol::ValveState;
+
+/// One test at a time: they share two cores with real-time runs.
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
 
 #[test]
 fn a_recorded_sim_run_is_readable_by_the_mcap_reader_and_replays_exactly() {
+    let _serial = serial();
     let mut scenario = Scenario::load("grasp-hold").expect("preset");
     // Charging takes ~2.5 s; closing and contact follow.
     scenario.duration_s = 5.0;
@@ -161,6 +173,7 @@ fn frame_dir(dir: &Path, seed: u64, n: usize) {
 
 #[test]
 fn record_then_replay_on_the_command_line_and_a_truncated_file() {
+    let _serial = serial();
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a"), dir.path().join("b"));
     frame_dir(&a, 1, 3);
@@ -231,4 +244,105 @@ fn record_then_replay_on_the_command_line_and_a_truncated_file() {
     let o = dexitac(&["replay", config.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     assert!(text(&o).contains("not an MCAP file"), "{}", text(&o));
+}
+
+/// Kills the child on drop, whatever the test does.
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        if self.0.kill().is_ok() {
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// `dexitac run --render --record FILE --record-frames` on a simulated
+/// board, until it has closed the fingers for `after_closing`.
+fn recorded_run(dir: &Path, after_closing: Duration) -> (SimMcu, Child, PathBuf) {
+    let mcu = SimMcu::spawn(SimMcuConfig {
+        // A busy two-core machine may stall the host; the recording is
+        // under test here, the silence trip in sim_safety.rs.
+        firmware: dexitac_firmware::Config {
+            host_silence_ms: 10_000,
+            ..dexitac_firmware::Config::default()
+        },
+        ..SimMcuConfig::default()
+    })
+    .expect("simulated MCU");
+    let config = dir.join("gripper.toml");
+    std::fs::write(&config, "# defaults\n").unwrap();
+    let file = dir.join("run.mcap");
+    let child = Child(
+        Command::new(env!("CARGO_BIN_EXE_dexitac"))
+            .args([
+                "run",
+                "--render",
+                "--record-frames",
+                "--fps",
+                "15",
+                "--port",
+            ])
+            .arg(mcu.port_path())
+            .arg("--config")
+            .arg(&config)
+            .arg("--record")
+            .arg(&file)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn dexitac run"),
+    );
+    let until = Instant::now() + Duration::from_secs(60);
+    while !mcu.snapshot().chambers.contains(&ValveState::Inflate) {
+        assert!(Instant::now() < until, "the host never closed the fingers");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(after_closing);
+    (mcu, child, file)
+}
+
+#[test]
+fn run_records_until_ctrl_c_and_a_killed_run_leaves_a_recoverable_file() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(700));
+    let pid = i32::try_from(child.0.id()).expect("pid");
+    // SAFETY: kill only sends a signal to our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
+    let until = Instant::now() + Duration::from_secs(20);
+    let status = loop {
+        if let Some(status) = child.0.try_wait().expect("wait") {
+            break status;
+        }
+        assert!(Instant::now() < until, "dexitac run ignored Ctrl-C");
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    assert!(status.success(), "{status:?}");
+    let rec = Recording::open(&file, false).expect("a finished recording");
+    assert_eq!(rec.session.as_ref().unwrap().source, "run");
+    let reasons: Vec<&str> = rec.commands.iter().map(|c| c.reason.as_str()).collect();
+    assert!(reasons.contains(&"close fingers"), "{reasons:?}");
+    assert!(!rec.telemetry.is_empty());
+    assert!(rec.telemetry.iter().any(|t| t.valve_codes.contains(&1)));
+    assert_eq!(rec.stopped.len(), 1);
+    assert!(rec.frames.len() >= 4, "{} frames", rec.frames.len());
+    let out = replay::replay(&rec, &Params::default(), 1).unwrap();
+    assert!(out.summary.within(0.0), "{:?}", out.summary);
+
+    // Killed while recording: no summary; refused, then recovered.
+    let dir = tempfile::tempdir().unwrap();
+    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(1_500));
+    child.0.kill().expect("kill");
+    let _ = child.0.wait();
+    match Recording::open(&file, false) {
+        Err(e @ ReadError::Damaged { .. }) => eprintln!("as expected: {e}"),
+        other => panic!("expected Damaged, got {other:?}"),
+    }
+    let rec = Recording::open(&file, true).expect("recovered");
+    assert!(rec.damage.is_some());
+    assert!(
+        !rec.frames.is_empty(),
+        "whole chunks before the kill are kept"
+    );
 }
