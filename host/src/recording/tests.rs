@@ -331,3 +331,20 @@ fn spawned_recorder_writes_a_channel_of_events() {
     assert_eq!(rec.annotations[&1][0].points[0].points[0].x, 1.23);
     assert!(!rec.contacts[0].found);
 }
+
+#[test]
+fn paced_replay_waits_for_the_recorded_times() {
+    use crate::runtime::{Clock, FrameSource};
+    let (bytes, _, _) = record(1);
+    let rec = read(&bytes).unwrap();
+    // Frames at 100, 133, 166, 199 ms: paced, the last comes 99 ms of
+    // clock time after the first (a lower bound: sleeps never end early).
+    let clock = Clock::wall();
+    let mut src = ReplaySource::new(&rec, 0, true);
+    let mut times = Vec::new();
+    while let Some(f) = src.next_frame(&clock).unwrap() {
+        times.push(f.t_ms);
+    }
+    assert_eq!(times, [100, 133, 166, 199]);
+    assert!(clock.now_ms() >= 99, "{} ms", clock.now_ms());
+}
