@@ -1,10 +1,18 @@
 //! `dexitac run`: the task loop on the real gripper.
 //!
-//! Frame sources until the camera driver lands: `--frames DIR` (twice, one
-//! per fingertip; every PNG/JPEG in name order, the first one is the rest
-//! frame the pipeline is calibrated on, then one frame per `--fps` period),
-//! or `--render` (the simulator's camera showing a steady contact, to
-//! exercise the board and the link without cameras).
+//! Frame sources (give one per fingertip, twice):
+//! - `--camera DEV` (a V4L2 camera by path or index, `dexitac cameras`
+//!   lists them): `--camera-size`, `--fps`, `--camera-format`, `--warmup`;
+//!   the first `--rest-frames` frames after warm-up are the rest frames the
+//!   pipeline is calibrated on, so nothing may touch the fingertips at
+//!   start. A camera that is unplugged is reopened (stderr says "lost" and
+//!   "recovered"); the run goes on meanwhile without its frames.
+//! - `--frames DIR`: every PNG/JPEG in name order, the first one is the rest
+//!   frame, then one frame per `--fps` period, or at the times in the file
+//!   names with `--recorded-times` (`dexitac::sources`), or with no pause
+//!   with `--max-speed`.
+//! - `--render`: the simulator's camera showing a steady contact, to
+//!   exercise the board and the link without cameras.
 //!
 //! `GRIPPER.toml`:
 //!
@@ -38,7 +46,7 @@ use std::sync::Arc;
 use serde::Deserialize;
 
 use dexitac::calibrate;
-use dexitac::frame::{self, GreyFrame, RawFrame};
+use dexitac::camera::{CameraConfig, CaptureRequest, DeviceId, PixelFormat};
 use dexitac::grasp::GraspParams;
 use dexitac::link::{Link, LinkConfig};
 use dexitac::params::Params;
@@ -48,6 +56,7 @@ use dexitac::runtime::{
 };
 use dexitac::sim::plant::ContactState;
 use dexitac::sim::render::Renderer;
+use dexitac::sources::{self, FolderSource, Pace};
 use dexitac::synth::SensorSpec;
 use dexitac_protocol::CHAMBER_COUNT;
 
@@ -63,12 +72,35 @@ pub struct RunArgs {
     /// A directory of frames per fingertip (give it twice: sensor 0, sensor 1).
     #[arg(long, value_name = "DIR", num_args = 1)]
     frames: Vec<PathBuf>,
-    /// Frames per second for --frames.
+    /// Frames per second for --frames, and asked of --camera.
     #[arg(long, default_value_t = 30.0)]
     fps: f64,
+    /// --frames: pace by the `<N>ms` times in the file names (else --fps).
+    #[arg(long, conflicts_with = "max_speed")]
+    recorded_times: bool,
+    /// --frames: no pause between frames.
+    #[arg(long)]
+    max_speed: bool,
     /// Use the simulator's camera (a steady contact) instead of --frames.
-    #[arg(long, conflicts_with = "frames")]
+    #[arg(long, conflicts_with_all = ["frames", "camera"])]
     render: bool,
+    /// A camera per fingertip, by path or index (give it twice: sensor 0,
+    /// sensor 1).
+    #[arg(long, value_name = "DEV", num_args = 1, conflicts_with = "frames")]
+    camera: Vec<String>,
+    /// Camera frame size asked of the driver.
+    #[arg(long, value_name = "WxH", default_value = "640x480")]
+    camera_size: String,
+    /// Camera pixel format (mjpeg, yuyv, grey); default: the first of these
+    /// the camera offers.
+    #[arg(long, value_name = "FORMAT")]
+    camera_format: Option<PixelFormat>,
+    /// Camera frames dropped after each (re)open.
+    #[arg(long, default_value_t = dexitac::camera::DEFAULT_WARMUP_FRAMES)]
+    warmup: u32,
+    /// Camera frames averaged as the rest reference at start.
+    #[arg(long, default_value_t = 3)]
+    rest_frames: usize,
 }
 
 #[derive(Debug, Deserialize)]
@@ -191,68 +223,6 @@ impl GripperConfig {
     }
 }
 
-/// Frames from a directory, one per period.
-struct DirSource {
-    files: Vec<PathBuf>,
-    next: usize,
-    period_ms: u64,
-    next_ms: u64,
-    params: Params,
-}
-
-fn image_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
-        })
-        .collect();
-    files.sort();
-    if files.len() < 2 {
-        return Err(format!(
-            "{}: needs a rest frame and at least one more frame",
-            dir.display()
-        ));
-    }
-    Ok(files)
-}
-
-fn load_frame(path: &Path, params: &Params) -> Result<GreyFrame, SourceError> {
-    let img = image::open(path)
-        .map_err(|e| SourceError::Decode {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?
-        .into_luma8();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let data = img.into_raw();
-    let raw = RawFrame {
-        width: w,
-        height: h,
-        channels: 1,
-        data: &data,
-    };
-    Ok(frame::prepare(&raw, &params.frame)?.grey)
-}
-
-impl FrameSource for DirSource {
-    fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
-        let Some(path) = self.files.get(self.next).cloned() else {
-            return Ok(None);
-        };
-        self.next += 1;
-        clock.sleep_until(self.next_ms);
-        let t_ms = clock.now_ms();
-        self.next_ms = t_ms.max(self.next_ms) + self.period_ms;
-        let frame = load_frame(&path, &self.params)?;
-        Ok(Some(TimedFrame { t_ms, frame }))
-    }
-}
-
 /// The simulator's camera with a steady contact.
 struct SteadySource {
     renderer: Renderer,
@@ -273,7 +243,7 @@ impl FrameSource for SteadySource {
     }
 }
 
-fn sensors(args: &RunArgs, params: &Params) -> Result<Vec<Sensor>, String> {
+fn sensors(args: &RunArgs, params: &Params, stop: &Arc<AtomicBool>) -> Result<Vec<Sensor>, String> {
     let period_ms = if args.fps.is_finite() && args.fps > 0.1 && args.fps <= 1_000.0 {
         (1e3 / args.fps) as u64
     } else {
@@ -306,22 +276,100 @@ fn sensors(args: &RunArgs, params: &Params) -> Result<Vec<Sensor>, String> {
         }
         return Ok(out);
     }
-    if args.frames.len() != 2 {
-        return Err("give --frames twice (one directory per fingertip) or --render".into());
+    if !args.camera.is_empty() {
+        return camera_sensors(args, params, stop);
     }
+    if args.frames.len() != 2 {
+        return Err(
+            "give --frames twice or --camera twice (one per fingertip), or --render".into(),
+        );
+    }
+    let pace = if args.max_speed {
+        Pace::Max
+    } else if args.recorded_times {
+        Pace::Recorded { fps: args.fps }
+    } else {
+        Pace::Fps(args.fps)
+    };
     for dir in &args.frames {
-        let files = image_files(dir)?;
-        let rest = load_frame(&files[0], params).map_err(|e| e.to_string())?;
+        let files = sources::image_files(dir).map_err(|e| e.to_string())?;
+        if files.len() < 2 {
+            return Err(format!(
+                "{}: needs a rest frame and at least one more frame",
+                dir.display()
+            ));
+        }
+        let rest = sources::load_frame(&files[0], &params.frame).map_err(|e| e.to_string())?;
         let cal = calibrate::calibrate(&[rest], params)
             .map_err(|e| format!("{}: {e}", files[0].display()))?;
+        let source = FolderSource::new(files[1..].to_vec(), pace, &params.frame)
+            .map_err(|e| e.to_string())?;
         out.push(Sensor {
-            source: Box::new(DirSource {
-                files: files[1..].to_vec(),
-                next: 0,
-                period_ms,
-                next_ms: 0,
-                params: params.clone(),
-            }),
+            source: Box::new(source),
+            pipeline: Pipeline::new(cal, params.clone()),
+        });
+    }
+    Ok(out)
+}
+
+/// `640x480` -> (640, 480).
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("--camera-size {text:?}: expected WIDTHxHEIGHT, e.g. 640x480");
+    let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
+    Ok((
+        w.trim().parse().map_err(|_| bad())?,
+        h.trim().parse().map_err(|_| bad())?,
+    ))
+}
+
+/// Opens both cameras, calibrates each on its first frames after warm-up,
+/// and prints camera events (lost, recovered) on stderr.
+fn camera_sensors(
+    args: &RunArgs,
+    params: &Params,
+    stop: &Arc<AtomicBool>,
+) -> Result<Vec<Sensor>, String> {
+    if args.camera.len() != 2 {
+        return Err("give --camera twice (one per fingertip)".into());
+    }
+    let (width_px, height_px) = parse_size(&args.camera_size)?;
+    let config = CameraConfig {
+        request: CaptureRequest {
+            width_px,
+            height_px,
+            fps: args.fps,
+            formats: args
+                .camera_format
+                .map_or_else(|| PixelFormat::ALL.to_vec(), |f| vec![f]),
+        },
+        warmup_frames: args.warmup,
+        ..CameraConfig::default()
+    };
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for event in rx {
+            eprintln!("dexitac run: {event}");
+        }
+    });
+    let mut out = Vec::new();
+    for dev in &args.camera {
+        let id: DeviceId = dev.parse()?;
+        let mut cam = dexitac::camera::open_camera(&id, &config, &params.frame, Some(stop.clone()))
+            .map_err(|e| e.to_string())?;
+        cam.report_to(tx.clone());
+        eprintln!("dexitac run: camera {id}: {}", cam.mode());
+        let mut rest = Vec::new();
+        while rest.len() < args.rest_frames.max(1) {
+            match cam.next_prepared().map_err(|e| format!("{id}: {e}"))? {
+                Some((_, frame)) => rest.push(frame),
+                None => return Err("stopped before the rest frames were captured".into()),
+            }
+        }
+        let cal = calibrate::calibrate(&rest, params).map_err(|e| {
+            format!("{id}: rest frames (nothing may touch the fingertip at start): {e}")
+        })?;
+        out.push(Sensor {
+            source: Box::new(cam),
             pipeline: Pipeline::new(cal, params.clone()),
         });
     }
@@ -335,14 +383,14 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         None => Params::default(),
     };
     let control = config.control()?;
-    let sensors = sensors(args, &params)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    crate::cli_sim::stop_on_ctrl_c(&stop);
+    let sensors = sensors(args, &params, &stop)?;
     let link_config = LinkConfig {
         baud: config.baud,
         ..LinkConfig::default()
     };
     let mut link = Link::open(&args.port, link_config).map_err(|e| e.to_string())?;
-    let stop = Arc::new(AtomicBool::new(false));
-    crate::cli_sim::stop_on_ctrl_c(&stop);
     let (tx, rx) = mpsc::channel();
     let printer = std::thread::spawn(move || {
         for event in rx {

@@ -60,3 +60,8 @@ pub mod workspace;
 
 // Tactile-guarded manipulation primitives (issue 6, item 5).
 pub mod manipulation;
+
+// Tactile cameras, frame-folder replay and sensor setup helpers (issue 7).
+pub mod camera;
+pub mod sensor_setup;
+pub mod sources;
