@@ -4,6 +4,7 @@ mod analyze;
 mod bench_cmd;
 mod cli_kinematics;
 mod cli_run;
+mod cli_sensor;
 mod cli_sim;
 mod synth_cmd;
 
@@ -49,6 +50,13 @@ enum Command {
     /// Fit the linear pressure -> angle actuator model to measured
     /// `pressure_kpa,angle_deg` rows by least squares.
     FitActuator(cli_kinematics::FitArgs),
+    /// List the tactile cameras (V4L2 capture devices) with their formats
+    /// and sizes. Exit 1 when there is none.
+    Cameras,
+    /// Sensor setup: tune the marker detector to the pin count, check a
+    /// skin's health.
+    #[command(subcommand)]
+    Sensor(cli_sensor::SensorCommand),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -102,6 +110,9 @@ fn main() -> ExitCode {
         Some(Command::FitActuator(args)) => {
             cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
         }
+        Some(Command::Cameras) => cli_sensor::cameras(),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Tune(args))) => cli_sensor::tune(&args),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Health(args))) => cli_sensor::health(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",

@@ -5,15 +5,18 @@
 //!
 //! Like Bristol's `vsp` tunes its blob detector to the known pin count, the
 //! search runs the calibration's detector ([`markers::auto_detector`], then
-//! [`markers::detect`]) on the rest frame for every marker scale
-//! (`markers.lobe_px`, odd 3..=15) and strength threshold
+//! [`markers::detect`]) on the rest frame for each strength threshold
 //! (`markers.strength_ratio`, 0.05..=0.95 in steps of 0.05) and counts the
-//! markers. Of the settings that find exactly the pin count it picks the
-//! scale with the widest run of such thresholds and the middle of that run
-//! (the setting furthest from finding one marker more or less). When no
-//! setting finds the count at the configured `markers.min_contrast`, it
-//! also tries other contrasts (2..=24 grey levels). Without an exact match
-//! it returns the closest count, marked not exact.
+//! markers: first at the configured scale (automatic unless
+//! `markers.lobe_px` is set), then at each explicit scale (odd lobes
+//! 3..=15). Per scale it takes the middle of the longest run of thresholds
+//! that find exactly the pin count (the setting furthest from finding one
+//! marker more or less). It stops at the first scale whose run spans at
+//! least one step either side, so a config that already works changes
+//! least; else it keeps the widest run. When no setting finds the count at
+//! the configured `markers.min_contrast`, it also tries other contrasts
+//! (2..=24 grey levels). Without an exact match it returns the closest
+//! count, marked not exact.
 //!
 //! # Health ([`health`])
 //!
@@ -135,34 +138,39 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
             .iter()
             .filter(|&&c| c != base.markers.min_contrast),
     );
+    // The configured scale (automatic unless set) first: when it finds the
+    // count with a margin, the config changes as little as possible (and
+    // keeps the automatic binning, which the speed depends on).
+    let mut lobes = vec![base.markers.lobe_px];
+    lobes.extend(
+        TUNE_LOBES_PX
+            .iter()
+            .map(|&l| Some(l))
+            .filter(|l| *l != base.markers.lobe_px),
+    );
     for (k, &contrast) in contrasts.iter().enumerate() {
         if k > 0 && best.as_ref().is_some_and(|b| b.exact) {
             break;
         }
-        for lobe in TUNE_LOBES_PX {
-            if 3 * lobe as usize + 2 >= rest.width().min(rest.height()) {
+        for &lobe in &lobes {
+            if lobe.is_some_and(|l| 3 * l as usize + 2 >= rest.width().min(rest.height())) {
                 continue;
             }
+            let params_for = |ratio: f32| MarkerParams {
+                lobe_px: lobe,
+                strength_ratio: ratio,
+                min_contrast: contrast,
+                ..base.markers.clone()
+            };
             let counts: Vec<(f32, usize)> = TUNE_RATIO_STEPS
                 .map(|s| {
-                    let ratio = s as f32 * 0.05;
-                    let p = MarkerParams {
-                        lobe_px: Some(lobe),
-                        strength_ratio: ratio,
-                        min_contrast: contrast,
-                        ..base.markers.clone()
-                    };
-                    (ratio, count_markers(rest, &p))
+                    let ratio = s as f32 * RATIO_STEP;
+                    (ratio, count_markers(rest, &params_for(ratio)))
                 })
                 .collect();
             tried += counts.len();
             let candidate = pick(&counts, pins).map(|(ratio, found, range)| TuneResult {
-                markers: MarkerParams {
-                    lobe_px: Some(lobe),
-                    strength_ratio: ratio,
-                    min_contrast: contrast,
-                    ..base.markers.clone()
-                },
+                markers: params_for(ratio),
                 found,
                 pins,
                 exact: found == pins,
@@ -174,6 +182,12 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
                     best = Some(c);
                 }
             }
+            if best.as_ref().is_some_and(has_margin) {
+                break;
+            }
+        }
+        if best.as_ref().is_some_and(has_margin) {
+            break;
         }
     }
     let mut best = best.ok_or(SetupError::NoMarkers)?;
@@ -181,9 +195,22 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
     Ok(best)
 }
 
+/// Step of the strength threshold sweep.
+const RATIO_STEP: f32 = 0.05;
+
+/// Exact, with at least one threshold step to spare on each side.
+fn has_margin(r: &TuneResult) -> bool {
+    r.exact
+        && r.ratio_range
+            .is_some_and(|(lo, hi)| hi - lo >= 2.0 * RATIO_STEP - 1e-4)
+}
+
+/// A threshold pick: (ratio, markers found, run of exact ratios).
+type Pick = (f32, usize, Option<(f32, f32)>);
+
 /// The ratio to use from one scale's sweep: the middle of the longest run
 /// that finds exactly `pins`, else the closest count (`None`: nothing found).
-fn pick(counts: &[(f32, usize)], pins: usize) -> Option<(f32, usize, Option<(f32, f32)>)> {
+fn pick(counts: &[(f32, usize)], pins: usize) -> Option<Pick> {
     let mut best_run: Option<(usize, usize)> = None;
     let mut i = 0;
     while i < counts.len() {
@@ -673,6 +700,17 @@ mod tests {
         assert_eq!(count_markers(&rest.image, &r.markers), pins);
         let (lo, hi) = r.ratio_range.unwrap();
         assert!(lo <= r.markers.strength_ratio && r.markers.strength_ratio <= hi);
+    }
+
+    #[test]
+    fn tune_keeps_a_config_that_already_finds_the_pins() {
+        let rest = rest_frame(&sensor(), 1);
+        let base = Params::default();
+        let pins = count_markers(&rest.image, &base.markers);
+        let r = tune(&rest.image, pins, &base).unwrap();
+        assert!(r.exact);
+        assert_eq!(r.markers.lobe_px, None, "the automatic scale was replaced");
+        assert_eq!(r.tried, TUNE_RATIO_STEPS.count());
     }
 
     #[test]
