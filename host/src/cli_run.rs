@@ -46,7 +46,7 @@ use std::sync::Arc;
 use serde::Deserialize;
 
 use dexitac::calibrate;
-use dexitac::camera::{CameraConfig, CaptureRequest, DeviceId, PixelFormat};
+use dexitac::camera::{CameraConfig, CameraStats, CaptureRequest, DeviceId, PixelFormat};
 use dexitac::grasp::GraspParams;
 use dexitac::link::{Link, LinkConfig};
 use dexitac::params::Params;
@@ -85,7 +85,8 @@ pub struct RunArgs {
     #[arg(long, conflicts_with_all = ["frames", "camera"])]
     render: bool,
     /// A camera per fingertip, by path or index (give it twice: sensor 0,
-    /// sensor 1).
+    /// sensor 1). Prefer the stable /dev/v4l/by-id/... names: a replugged
+    /// camera may come back as another /dev/videoN.
     #[arg(long, value_name = "DEV", num_args = 1, conflicts_with = "frames")]
     camera: Vec<String>,
     /// Camera frame size asked of the driver.
@@ -243,7 +244,15 @@ impl FrameSource for SteadySource {
     }
 }
 
-fn sensors(args: &RunArgs, params: &Params, stop: &Arc<AtomicBool>) -> Result<Vec<Sensor>, String> {
+/// Each camera's name and counters, for the summary after the run.
+type CameraStatsList = Vec<(String, Arc<CameraStats>)>;
+
+fn sensors(
+    args: &RunArgs,
+    params: &Params,
+    stop: &Arc<AtomicBool>,
+    camera_stats: &mut CameraStatsList,
+) -> Result<Vec<Sensor>, String> {
     let period_ms = if args.fps.is_finite() && args.fps > 0.1 && args.fps <= 1_000.0 {
         (1e3 / args.fps) as u64
     } else {
@@ -277,7 +286,7 @@ fn sensors(args: &RunArgs, params: &Params, stop: &Arc<AtomicBool>) -> Result<Ve
         return Ok(out);
     }
     if !args.camera.is_empty() {
-        return camera_sensors(args, params, stop);
+        return camera_sensors(args, params, stop, camera_stats);
     }
     if args.frames.len() != 2 {
         return Err(
@@ -328,6 +337,7 @@ fn camera_sensors(
     args: &RunArgs,
     params: &Params,
     stop: &Arc<AtomicBool>,
+    camera_stats: &mut CameraStatsList,
 ) -> Result<Vec<Sensor>, String> {
     if args.camera.len() != 2 {
         return Err("give --camera twice (one per fingertip)".into());
@@ -357,6 +367,7 @@ fn camera_sensors(
         let mut cam = dexitac::camera::open_camera(&id, &config, &params.frame, Some(stop.clone()))
             .map_err(|e| e.to_string())?;
         cam.report_to(tx.clone());
+        camera_stats.push((id.to_string(), cam.stats()));
         eprintln!("dexitac run: camera {id}: {}", cam.mode());
         let mut rest = Vec::new();
         while rest.len() < args.rest_frames.max(1) {
@@ -385,7 +396,8 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
     let control = config.control()?;
     let stop = Arc::new(AtomicBool::new(false));
     crate::cli_sim::stop_on_ctrl_c(&stop);
-    let sensors = sensors(args, &params, &stop)?;
+    let mut camera_stats = Vec::new();
+    let sensors = sensors(args, &params, &stop, &mut camera_stats)?;
     let link_config = LinkConfig {
         baud: config.baud,
         ..LinkConfig::default()
@@ -422,6 +434,18 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
     drop(tx);
     if printer.join().is_err() {
         eprintln!("dexitac run: the event printer failed");
+    }
+    for (name, stats) in &camera_stats {
+        let n = |c: &std::sync::atomic::AtomicU64| CameraStats::get(c);
+        eprintln!(
+            "dexitac run: camera {name}: {} frames used, {} stale dropped, {} warm-up, \
+             {} corrupt, lost {} times",
+            n(&stats.delivered),
+            n(&stats.dropped_stale),
+            n(&stats.dropped_warmup),
+            n(&stats.corrupt),
+            n(&stats.lost)
+        );
     }
     result.map(|_| ()).map_err(|e| e.to_string())
 }

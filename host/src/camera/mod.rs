@@ -25,7 +25,12 @@
 //!   [`CameraConfig::reconnect_max_ms`]), reporting
 //!   [`CameraEvent::Lost`] and [`CameraEvent::Recovered`]. The source does not
 //!   end the run on its own: `next_frame` waits, and returns `None` only
-//!   once its stop flag ([`CameraSource::stop_flag`]) is set.
+//!   once the stop flag given to [`CameraSource::open`] (the Ctrl-C flag in
+//!   `dexitac run`) is set or [`CameraSource::halt`] is called. Known gap:
+//!   the task loop does not tell its sources when it ends on an error, so
+//!   after such an error while a camera is lost, `dexitac run` waits for the
+//!   camera or Ctrl-C before its shutdown commands (the firmware's
+//!   host-silence trip makes the gripper safe meanwhile).
 //! - **Errors**: opening reports a typed [`CameraError`] (missing, busy,
 //!   no permission, not a capture device, no usable format).
 //!
