@@ -64,6 +64,7 @@ pub struct FakeDevice {
     driver_latency: Option<Duration>,
     fail_open: Option<FakeFailure>,
     unplugs: Vec<Unplug>,
+    once: bool,
     counters: Arc<FakeCounters>,
     open: bool,
     next_due: Instant,
@@ -84,6 +85,7 @@ impl FakeDevice {
             driver_latency: None,
             fail_open: None,
             unplugs: Vec::new(),
+            once: false,
             counters: Arc::default(),
             open: false,
             next_due: Instant::now(),
@@ -107,6 +109,12 @@ impl FakeDevice {
     /// is handed out.
     pub fn driver_timestamps(mut self, latency: Duration) -> Self {
         self.driver_latency = Some(latency);
+        self
+    }
+
+    /// Plays the buffers once, then stalls (no buffer ever again).
+    pub fn once(mut self) -> Self {
+        self.once = true;
         self
     }
 
@@ -202,6 +210,10 @@ impl RawDevice for FakeDevice {
             });
         }
         let now = Instant::now();
+        if self.once && seq >= self.buffers.len() as u64 {
+            std::thread::sleep(timeout);
+            return Ok(None);
+        }
         if self.next_due > now + timeout {
             std::thread::sleep(timeout);
             return Ok(None);
