@@ -335,7 +335,7 @@ impl Default for HealthLimits {
             min_coverage: 0.98,
             max_missing_fraction: 0.05,
             max_jitter_px: 0.5,
-            weak_fraction: 0.35,
+            weak_fraction: 0.5,
             max_offset_pitch: 0.25,
         }
     }
@@ -794,7 +794,7 @@ mod tests {
         assert!(r.coverage < 0.98, "{}", r.coverage);
     }
 
-    /// Adds an elliptic Gaussian blob (marker-bright) at `c`, long axis
+    /// Adds an elliptic Gaussian blob (`amplitude` over the skin) at `c`, long axis
     /// along `(ux, uy)`, after erasing the pixels within `erase_px` of
     /// each point of `erase` to the skin level.
     fn paint_blob(
@@ -802,6 +802,7 @@ mod tests {
         c: PointPx,
         (ux, uy): (f64, f64),
         (sigma_along, sigma_across): (f64, f64),
+        amplitude: f64,
         erase: &[PointPx],
         erase_px: f64,
     ) -> GreyFrame {
@@ -820,7 +821,7 @@ mod tests {
                 let g = (-(along / sigma_along).powi(2) / 2.0
                     - (across / sigma_across).powi(2) / 2.0)
                     .exp();
-                *v = (*v as f64).max(25.0 + 170.0 * g).round().min(255.0) as u8;
+                *v = (*v as f64).max(25.0 + amplitude * g).round().min(255.0) as u8;
             }
         }
         GreyFrame::new(w, h, data).unwrap()
@@ -846,6 +847,7 @@ mod tests {
             mid,
             ((b.x - a.x) / len, (b.y - a.y) / len),
             (len / 2.0, 2.5),
+            170.0,
             &[a, b],
             6.0,
         );
@@ -882,6 +884,7 @@ mod tests {
             speck,
             (1.0, 0.0),
             (2.5, 2.5),
+            170.0,
             &[],
             0.0,
         );
@@ -903,6 +906,46 @@ mod tests {
             "{:?}",
             r.reasons
         );
+    }
+
+    /// The rest marker nearest to `p`.
+    fn nearest_marker(rest: &crate::synth::SynthFrame, p: PointPx) -> PointPx {
+        *rest
+            .rest_markers
+            .iter()
+            .min_by(|a, b| distance(**a, p).total_cmp(&distance(**b, p)))
+            .unwrap()
+    }
+
+    #[test]
+    fn shifted_and_faded_markers_are_damaged() {
+        let rest = rest_frame(&sensor(), 1);
+        let a = nearest_marker(&rest, PointPx::new(300.0, 200.0));
+        let b = nearest_marker(&rest, PointPx::new(360.0, 280.0));
+        // Marker a sits 4.5 px (0.3 pitch) off its rest place; marker b
+        // shows at 40 % of its contrast.
+        let shifted_to = PointPx::new(a.x + 4.5, a.y);
+        let frame = rest_frame(&sensor(), 2).image;
+        let frame = paint_blob(&frame, shifted_to, (1.0, 0.0), (2.5, 2.5), 170.0, &[a], 6.0);
+        let frame = paint_blob(&frame, b, (1.0, 0.0), (2.5, 2.5), 0.4 * 170.0, &[b], 6.0);
+        let r = health(
+            &rest.image,
+            &[frame],
+            &Params::default(),
+            &HealthLimits::default(),
+            None,
+        )
+        .unwrap();
+        assert_eq!(r.damaged.len(), 2, "{r:?}");
+        for m in [a, b] {
+            assert!(
+                r.damaged.iter().any(|d| distance(*d, m) < 1.0),
+                "{m:?} not in {:?}",
+                r.damaged
+            );
+        }
+        assert!(r.missing.is_empty() && r.extra.is_empty());
+        assert_eq!(r.verdict, Verdict::Warn);
     }
 
     #[test]
