@@ -9,7 +9,6 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-use dexitac::calibrate;
 use dexitac::frame::GreyFrame;
 use dexitac::params::Params;
 use dexitac::pipeline::Pipeline;
@@ -141,22 +140,14 @@ pub struct RecordArgs {
     /// The MCAP file to write.
     #[arg(long, value_name = "FILE.mcap")]
     out: PathBuf,
-    /// A directory of frames per fingertip (once or twice; the first frame
-    /// in name order is the rest frame).
-    #[arg(long, value_name = "DIR", num_args = 1)]
-    frames: Vec<PathBuf>,
-    /// Use the simulator's cameras (a steady contact) instead of --frames.
-    #[arg(long, conflicts_with = "frames")]
-    render: bool,
+    #[command(flatten)]
+    sources: crate::cli_sources::SourceArgs,
     /// Stop after this many seconds (default: when the frames end, or Ctrl-C).
     #[arg(long, value_name = "S")]
     duration_s: Option<f64>,
     /// Sensor config (TOML); defaults to the paper's parameters.
     #[arg(long, value_name = "SENSOR.toml")]
     config: Option<PathBuf>,
-    /// Frames per second of the sources.
-    #[arg(long, default_value_t = 30.0)]
-    fps: f64,
     /// Record contacts and markers only, no frames (cannot be replayed).
     #[arg(long)]
     no_frames: bool,
@@ -164,44 +155,6 @@ pub struct RecordArgs {
     #[arg(long, default_value_t = 1, value_name = "N",
           value_parser = clap::value_parser!(u32).range(1..))]
     frame_every: u32,
-}
-
-/// A frame source and the rest frames its pipeline is calibrated on.
-struct SourceSetup {
-    source: Box<dyn FrameSource>,
-    rest: Vec<GreyFrame>,
-    label: String,
-}
-
-/// The frame sources of `dexitac record` (one place to add a camera).
-fn open_sources(args: &RecordArgs, params: &Params) -> Result<Vec<SourceSetup>, String> {
-    let period_ms = crate::cli_run::period_ms(args.fps)?;
-    if args.render {
-        return Ok((0..2)
-            .map(|finger| {
-                let (source, rest) = crate::cli_run::steady_source(finger, params, period_ms);
-                SourceSetup {
-                    source,
-                    rest,
-                    label: format!("simulated sensor {finger}"),
-                }
-            })
-            .collect());
-    }
-    if args.frames.is_empty() || args.frames.len() > 2 {
-        return Err("give --frames once or twice (one directory per fingertip) or --render".into());
-    }
-    args.frames
-        .iter()
-        .map(|dir| {
-            let (source, rest) = crate::cli_run::dir_source(dir, params, period_ms)?;
-            Ok(SourceSetup {
-                source,
-                rest: vec![rest],
-                label: dir.display().to_string(),
-            })
-        })
-        .collect()
 }
 
 /// One sensor: frames through the pipeline to the recorder until the
@@ -258,15 +211,12 @@ fn record_inner(args: &RecordArgs) -> Result<(), String> {
         Some(_) => return Err("--duration-s must be positive".into()),
         None => None,
     };
-    let setups = open_sources(args, &params)?;
-    let mut pipelines = Vec::new();
-    for s in &setups {
-        let cal = calibrate::calibrate(&s.rest, &params)
-            .map_err(|e| format!("{}: rest frame: {e}", s.label))?;
-        pipelines.push(Pipeline::new(cal, params.clone()));
-    }
-    let rests: Vec<Vec<GreyFrame>> = setups.iter().map(|s| s.rest.clone()).collect();
-    let labels: Vec<&str> = setups.iter().map(|s| s.label.as_str()).collect();
+    let stop = Arc::new(AtomicBool::new(false));
+    crate::cli_sim::stop_on_ctrl_c(&stop);
+    let mut cameras = Vec::new();
+    let setups = crate::cli_sources::open(&args.sources, &params, 1..=2, &stop, &mut cameras)?;
+    let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
+    let (sensors, rests) = crate::cli_sources::calibrated(setups, &params)?;
     let recorder = open_recorder(
         &args.out,
         "record",
@@ -278,22 +228,19 @@ fn record_inner(args: &RecordArgs) -> Result<(), String> {
         args.frame_every,
     )?
     .spawn();
-    let stop = Arc::new(AtomicBool::new(false));
-    crate::cli_sim::stop_on_ctrl_c(&stop);
     let clock = Clock::wall();
     let results: Vec<Result<u64, String>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = setups
+        let handles: Vec<_> = sensors
             .into_iter()
-            .zip(&pipelines)
             .enumerate()
-            .map(|(sensor, (setup, pipeline))| {
+            .map(|(sensor, setup)| {
                 let tx = recorder.sender();
                 let stop = &stop;
                 scope.spawn(move || {
                     let r = sensor_loop(
                         sensor,
                         setup.source,
-                        pipeline,
+                        &setup.pipeline,
                         clock,
                         deadline_ms,
                         stop,
@@ -316,6 +263,7 @@ fn record_inner(args: &RecordArgs) -> Result<(), String> {
             .collect()
     });
     let stats = recorder.finish().map_err(|e| format!("recording: {e}"))?;
+    crate::cli_sources::print_camera_stats("record", &cameras);
     for r in &results {
         if let Err(e) = r {
             eprintln!("dexitac record: {e}");

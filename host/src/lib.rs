@@ -63,3 +63,7 @@ pub mod manipulation;
 
 // Recording and replay in MCAP (issue 7, items 2b and 3).
 pub mod recording;
+// Tactile cameras, frame-folder replay and sensor setup helpers (issue 7).
+pub mod camera;
+pub mod sensor_setup;
+pub mod sources;

@@ -5,7 +5,9 @@ mod bench_cmd;
 mod cli_kinematics;
 mod cli_record;
 mod cli_run;
+mod cli_sensor;
 mod cli_sim;
+mod cli_sources;
 mod synth_cmd;
 
 use std::path::PathBuf;
@@ -56,6 +58,13 @@ enum Command {
     /// Run the pipeline again over a recording's frames and compare the
     /// contact centres with the recorded ones (exit 1 when they differ).
     Replay(cli_record::ReplayArgs),
+    /// List the tactile cameras (V4L2 capture devices) with their formats
+    /// and sizes. Exit 1 when there is none.
+    Cameras,
+    /// Sensor setup: tune the marker detector to the pin count, check a
+    /// skin's health.
+    #[command(subcommand)]
+    Sensor(cli_sensor::SensorCommand),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -111,6 +120,9 @@ fn main() -> ExitCode {
         }
         Some(Command::Record(args)) => cli_record::run_record(&args),
         Some(Command::Replay(args)) => cli_record::run_replay(&args),
+        Some(Command::Cameras) => cli_sensor::cameras(),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Tune(args))) => cli_sensor::tune(&args),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Health(args))) => cli_sensor::health(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",
