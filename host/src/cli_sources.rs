@@ -104,10 +104,15 @@ pub fn open(
     cameras: &mut CameraStatsList,
 ) -> Result<Vec<SourceSetup>, String> {
     let period_ms = period_ms(args.fps)?;
+    let times = |n: usize| match n {
+        1 => "once".to_string(),
+        2 => "twice".to_string(),
+        n => format!("{n} times"),
+    };
     let how_many = if counts.start() == counts.end() {
-        format!("{}", counts.start())
+        times(*counts.start())
     } else {
-        format!("{} or {}", counts.start(), counts.end())
+        format!("{} or {}", times(*counts.start()), times(*counts.end()))
     };
     if args.render {
         return Ok((0..*counts.end())
@@ -116,15 +121,13 @@ pub fn open(
     }
     if !args.camera.is_empty() {
         if !counts.contains(&args.camera.len()) {
-            return Err(format!(
-                "give --camera {how_many} time(s), one per fingertip"
-            ));
+            return Err(format!("give --camera {how_many} (one per fingertip)"));
         }
         return camera_sources(args, params, stop, cameras);
     }
     if !counts.contains(&args.frames.len()) {
         return Err(format!(
-            "give --frames or --camera {how_many} time(s) (one per fingertip), or --render"
+            "give --frames or --camera {how_many} (one per fingertip), or --render"
         ));
     }
     let pace = if args.max_speed {
