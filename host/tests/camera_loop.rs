@@ -45,16 +45,19 @@ fn through_camera(jpeg: &[u8], params: &Params) -> GreyFrame {
     frame::prepare(&raw, &params.frame).unwrap().grey
 }
 
-#[test]
-fn fake_cameras_feed_the_loop_through_an_unplug() {
-    let params = Params::default();
+/// Two fake MJPEG cameras with pressed frames; camera 0 is unplugged after
+/// `unplug.0` frames for `unplug.1`. `stop` is the cameras' own stop flag.
+fn fake_sensors(
+    params: &Params,
+    unplug: (u64, Duration),
+    stop: Option<Arc<AtomicBool>>,
+    cam_tx: &mpsc::Sender<CameraEvent>,
+) -> Vec<Sensor> {
     let sensor = SensorSpec::nominal(640, 480);
-    let stop = Arc::new(AtomicBool::new(false));
-    let (cam_tx, cam_rx) = mpsc::channel();
     let mut sensors = Vec::new();
     for finger in 0..2u64 {
         let rest = mjpeg(&synth::rest_frame(&sensor, 100 + finger).image);
-        let cal = calibrate::calibrate(&[through_camera(&rest, &params)], &params).unwrap();
+        let cal = calibrate::calibrate(&[through_camera(&rest, params)], params).unwrap();
         let pressed: Vec<Vec<u8>> = (0..4)
             .map(|seed| {
                 mjpeg(
@@ -77,21 +80,34 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
             .named(&format!("fake{finger}"))
             .period(Duration::from_millis(33));
         if finger == 0 {
-            fake = fake.unplug_after(15, Duration::from_millis(300));
+            fake = fake.unplug_after(unplug.0, unplug.1);
         }
         let config = CameraConfig {
             warmup_frames: 2,
             reconnect_min_ms: 50,
             ..CameraConfig::default()
         };
-        let cam =
-            CameraSource::open(Box::new(fake), &config, &params.frame, Some(stop.clone())).unwrap();
+        let cam = CameraSource::open(Box::new(fake), &config, &params.frame, stop.clone()).unwrap();
         cam.report_to(cam_tx.clone());
         sensors.push(Sensor {
             source: Box::new(cam),
             pipeline: Pipeline::new(cal, params.clone()),
         });
     }
+    sensors
+}
+
+#[test]
+fn fake_cameras_feed_the_loop_through_an_unplug() {
+    let params = Params::default();
+    let stop = Arc::new(AtomicBool::new(false));
+    let (cam_tx, cam_rx) = mpsc::channel();
+    let sensors = fake_sensors(
+        &params,
+        (15, Duration::from_millis(300)),
+        Some(stop.clone()),
+        &cam_tx,
+    );
     let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
     let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
     let stopper = {
@@ -150,6 +166,43 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
         "{before} before, {after} after: {:?}",
         seen[0]
     );
+    std::thread::sleep(Duration::from_millis(20));
+    assert_eq!(mcu.snapshot().state, ArmState::Disarmed);
+}
+
+/// The loop ends (here: stop requested) while a camera is lost for an hour
+/// and the cameras were given no stop flag: the loop halts its sources, so
+/// `run` returns at once with the board disarmed instead of waiting for the
+/// camera.
+#[test]
+fn the_loop_ends_promptly_while_a_camera_is_lost() {
+    let params = Params::default();
+    let (cam_tx, _cam_rx) = mpsc::channel();
+    let sensors = fake_sensors(&params, (10, Duration::from_secs(3600)), None, &cam_tx);
+    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
+    let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let stopper = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(1_500));
+            stop.store(true, Ordering::Relaxed);
+        })
+    };
+    let (tx, _rx) = mpsc::channel();
+    let t0 = std::time::Instant::now();
+    let result = runtime::run(
+        &ControlConfig::default(),
+        &mut link,
+        sensors,
+        Clock::wall(),
+        &stop,
+        &tx,
+    );
+    let took = t0.elapsed();
+    stopper.join().unwrap();
+    assert_eq!(result.unwrap(), StopReason::Requested);
+    assert!(took < Duration::from_secs(30), "run took {took:?}");
     std::thread::sleep(Duration::from_millis(20));
     assert_eq!(mcu.snapshot().state, ArmState::Disarmed);
 }

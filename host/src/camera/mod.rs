@@ -26,11 +26,10 @@
 //!   [`CameraEvent::Lost`] and [`CameraEvent::Recovered`]. The source does not
 //!   end the run on its own: `next_frame` waits, and returns `None` only
 //!   once the stop flag given to [`CameraSource::open`] (the Ctrl-C flag in
-//!   `dexitac run`) is set or [`CameraSource::halt`] is called. Known gap:
-//!   the task loop does not tell its sources when it ends on an error, so
-//!   after such an error while a camera is lost, `dexitac run` waits for the
-//!   camera or Ctrl-C before its shutdown commands (the firmware's
-//!   host-silence trip makes the gripper safe meanwhile).
+//!   `dexitac run`) is set, [`CameraSource::halt`] is called, or its
+//!   [`FrameSource::halt_handle`] is called: the task loop does that when it
+//!   ends (after sealing and disarming the gripper), so a run that ends on
+//!   an error while a camera is lost does not wait for the camera.
 //! - **Errors**: opening reports a typed [`CameraError`] (missing, busy,
 //!   no permission, not a capture device, no usable format).
 //!
@@ -55,7 +54,7 @@ use std::time::{Duration, Instant};
 
 use crate::frame::{self, RawFrame};
 use crate::params::FrameParams;
-use crate::runtime::{Clock, FrameSource, SourceError, TimedFrame};
+use crate::runtime::{Clock, FrameSource, HaltHandle, SourceError, TimedFrame};
 
 /// Default number of buffers dropped after each (re)open.
 pub const DEFAULT_WARMUP_FRAMES: u32 = 5;
@@ -699,6 +698,11 @@ impl FrameSource for CameraSource {
         let t_ms = clock_ms_at(clock, captured, Instant::now());
         Ok(Some(TimedFrame { t_ms, frame }))
     }
+
+    fn halt_handle(&self) -> Option<HaltHandle> {
+        let shared = Arc::clone(&self.shared);
+        Some(Box::new(move || shared.halt.store(true, Ordering::Relaxed)))
+    }
 }
 
 impl Drop for CameraSource {
@@ -992,6 +996,23 @@ mod tests {
         let back = rx.recv_timeout(Duration::from_secs(5)).unwrap();
         assert!(matches!(back, CameraEvent::Recovered { .. }), "{back:?}");
         assert!(CameraStats::get(&counters.opens) >= 2);
+    }
+
+    #[test]
+    fn the_halt_handle_ends_a_wait_for_a_lost_camera() {
+        let fake = FakeDevice::new(PixelFormat::Yuyv, W, H, yuyv_stream(10))
+            .unplug_after(0, Duration::from_secs(3600));
+        let mut cam = CameraSource::open(Box::new(fake), &config(0), &params(), None).unwrap();
+        let halt = cam.halt_handle().expect("a camera can be halted");
+        let setter = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(100));
+            halt();
+        });
+        let t0 = Instant::now();
+        assert!(cam.next_frame(&Clock::wall()).unwrap().is_none());
+        assert!(t0.elapsed() < Duration::from_secs(5));
+        setter.join().unwrap();
+        drop(cam);
     }
 
     #[test]
