@@ -1,10 +1,9 @@
 //! `dexitac run`: the task loop on the real gripper.
 //!
-//! Frame sources until the camera driver lands: `--frames DIR` (twice, one
-//! per fingertip; every PNG/JPEG in name order, the first one is the rest
-//! frame the pipeline is calibrated on, then one frame per `--fps` period),
-//! or `--render` (the simulator's camera showing a steady contact, to
-//! exercise the board and the link without cameras).
+//! Frame sources: `--camera DEV`, `--frames DIR` (once per fingertip) or
+//! `--render`, see the `cli_sources` module (shared with `dexitac record`
+//! and `dexitac view`). `--record FILE.mcap` records the run (see
+//! host/RECORDING.md).
 //!
 //! `GRIPPER.toml`:
 //!
@@ -37,19 +36,13 @@ use std::sync::Arc;
 
 use serde::Deserialize;
 
-use dexitac::calibrate;
-use dexitac::frame::{self, GreyFrame, RawFrame};
 use dexitac::grasp::GraspParams;
 use dexitac::link::{Link, LinkConfig};
 use dexitac::params::Params;
-use dexitac::pipeline::Pipeline;
-use dexitac::runtime::{
-    self, Clock, ControlConfig, FrameSource, RuntimeEvent, Sensor, SourceError, TimedFrame,
-};
-use dexitac::sim::plant::ContactState;
-use dexitac::sim::render::Renderer;
-use dexitac::synth::SensorSpec;
+use dexitac::runtime::{self, Clock, ControlConfig, RuntimeEvent};
 use dexitac_protocol::CHAMBER_COUNT;
+
+use crate::cli_sources::{self, SourceArgs};
 
 /// Arguments of `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -60,15 +53,10 @@ pub struct RunArgs {
     /// Gripper configuration (TOML).
     #[arg(long, value_name = "GRIPPER.toml")]
     config: PathBuf,
-    /// A directory of frames per fingertip (give it twice: sensor 0, sensor 1).
-    #[arg(long, value_name = "DIR", num_args = 1)]
-    frames: Vec<PathBuf>,
-    /// Frames per second for --frames.
-    #[arg(long, default_value_t = 30.0)]
-    fps: f64,
-    /// Use the simulator's camera (a steady contact) instead of --frames.
-    #[arg(long, conflicts_with = "frames")]
-    render: bool,
+    #[command(flatten)]
+    sources: SourceArgs,
+    #[command(flatten)]
+    record: crate::cli_record::RecordFlags,
 }
 
 #[derive(Debug, Deserialize)]
@@ -191,161 +179,42 @@ impl GripperConfig {
     }
 }
 
-/// Frames from a directory, one per period.
-struct DirSource {
-    files: Vec<PathBuf>,
-    next: usize,
-    period_ms: u64,
-    next_ms: u64,
-    params: Params,
-}
-
-pub(crate) fn image_files(dir: &Path) -> Result<Vec<PathBuf>, String> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
-        })
-        .collect();
-    files.sort();
-    if files.len() < 2 {
-        return Err(format!(
-            "{}: needs a rest frame and at least one more frame",
-            dir.display()
-        ));
-    }
-    Ok(files)
-}
-
-pub(crate) fn load_frame(path: &Path, params: &Params) -> Result<GreyFrame, SourceError> {
-    let img = image::open(path)
-        .map_err(|e| SourceError::Decode {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?
-        .into_luma8();
-    let (w, h) = (img.width() as usize, img.height() as usize);
-    let data = img.into_raw();
-    let raw = RawFrame {
-        width: w,
-        height: h,
-        channels: 1,
-        data: &data,
-    };
-    Ok(frame::prepare(&raw, &params.frame)?.grey)
-}
-
-impl FrameSource for DirSource {
-    fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
-        let Some(path) = self.files.get(self.next).cloned() else {
-            return Ok(None);
-        };
-        self.next += 1;
-        clock.sleep_until(self.next_ms);
-        let t_ms = clock.now_ms();
-        self.next_ms = t_ms.max(self.next_ms) + self.period_ms;
-        let frame = load_frame(&path, &self.params)?;
-        Ok(Some(TimedFrame { t_ms, frame }))
-    }
-}
-
-/// The simulator's camera with a steady contact.
-struct SteadySource {
-    renderer: Renderer,
-    contact: ContactState,
-    period_ms: u64,
-    next_ms: u64,
-}
-
-impl FrameSource for SteadySource {
-    fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
-        clock.sleep_until(self.next_ms);
-        let t_ms = clock.now_ms();
-        self.next_ms = t_ms.max(self.next_ms) + self.period_ms;
-        Ok(Some(TimedFrame {
-            t_ms,
-            frame: self.renderer.render(Some(&self.contact)),
-        }))
-    }
-}
-
-fn sensors(args: &RunArgs, params: &Params) -> Result<Vec<Sensor>, String> {
-    let period_ms = if args.fps.is_finite() && args.fps > 0.1 && args.fps <= 1_000.0 {
-        (1e3 / args.fps) as u64
-    } else {
-        return Err("--fps must lie in 0.1..=1000".into());
-    };
-    let mut out = Vec::new();
-    if args.render {
-        for finger in 0..2 {
-            let mut renderer = Renderer::new(
-                SensorSpec::nominal(640, 480),
-                params.frame.mm_per_px,
-                finger as u64 + 1,
-            );
-            let rest = [renderer.render(None), renderer.render(None)];
-            let cal = calibrate::calibrate(&rest, params).map_err(|e| e.to_string())?;
-            out.push(Sensor {
-                source: Box::new(SteadySource {
-                    renderer,
-                    contact: ContactState {
-                        centre_mm: [0.0, 0.0],
-                        shear_mm: [0.0, 0.0],
-                        normal_n: 1.5,
-                        width_mm: 2.5,
-                    },
-                    period_ms,
-                    next_ms: 0,
-                }),
-                pipeline: Pipeline::new(cal, params.clone()),
-            });
-        }
-        return Ok(out);
-    }
-    if args.frames.len() != 2 {
-        return Err("give --frames twice (one directory per fingertip) or --render".into());
-    }
-    for dir in &args.frames {
-        let files = image_files(dir)?;
-        let rest = load_frame(&files[0], params).map_err(|e| e.to_string())?;
-        let cal = calibrate::calibrate(&[rest], params)
-            .map_err(|e| format!("{}: {e}", files[0].display()))?;
-        out.push(Sensor {
-            source: Box::new(DirSource {
-                files: files[1..].to_vec(),
-                next: 0,
-                period_ms,
-                next_ms: 0,
-                params: params.clone(),
-            }),
-            pipeline: Pipeline::new(cal, params.clone()),
-        });
-    }
-    Ok(out)
-}
-
 fn run_inner(args: &RunArgs) -> Result<(), String> {
     let config = GripperConfig::load(&args.config)?;
     let params = match &config.sensor_config {
         Some(path) => Params::load(path).map_err(|e| e.to_string())?,
         None => Params::default(),
     };
-    let control = config.control()?;
-    let sensors = sensors(args, &params)?;
+    let control = ControlConfig {
+        share_frames: args.record.record_frames,
+        ..config.control()?
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    crate::cli_sim::stop_on_ctrl_c(&stop);
+    let mut cameras = Vec::new();
+    let setups = cli_sources::open(&args.sources, &params, 2..=2, &stop, &mut cameras)?;
+    let (sensors, rests) = cli_sources::calibrated(setups, &params)?;
     let link_config = LinkConfig {
         baud: config.baud,
         ..LinkConfig::default()
     };
     let mut link = Link::open(&args.port, link_config).map_err(|e| e.to_string())?;
-    let stop = Arc::new(AtomicBool::new(false));
-    crate::cli_sim::stop_on_ctrl_c(&stop);
-    let (tx, rx) = mpsc::channel();
+    let recorder = crate::cli_record::start_recorder(
+        &args.record,
+        "run",
+        &format!("dexitac run --port {}", args.port.display()),
+        &rests,
+        config.sensor_config.as_deref(),
+        &params,
+    )?;
+    let tap = recorder.as_ref().map(|r| r.sender());
+    let (tx, rx) = mpsc::channel::<RuntimeEvent>();
     let printer = std::thread::spawn(move || {
         for event in rx {
+            if let Some(tap) = &tap {
+                // A failed recorder reports its error when finished.
+                let _ = tap.send(event.clone());
+            }
             match event {
                 RuntimeEvent::CommandSent {
                     t_ms, msg, reason, ..
@@ -375,7 +244,10 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
     if printer.join().is_err() {
         eprintln!("dexitac run: the event printer failed");
     }
-    result.map(|_| ()).map_err(|e| e.to_string())
+    cli_sources::print_camera_stats("run", &cameras);
+    let recorded = crate::cli_record::finish_recorder(recorder, &args.record);
+    result.map_err(|e| e.to_string())?;
+    recorded
 }
 
 /// Runs the subcommand.

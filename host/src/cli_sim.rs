@@ -6,8 +6,10 @@ use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+use dexitac::params::Params;
 use dexitac::sim::output;
-use dexitac::sim::rig::SimOptions;
+use dexitac::sim::plant::FINGER_COUNT;
+use dexitac::sim::rig::{self, SimOptions};
 use dexitac::sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
 
 /// Arguments of `dexitac sim`.
@@ -37,6 +39,8 @@ pub struct SimArgs {
     /// List the preset scenarios and exit.
     #[arg(long)]
     list: bool,
+    #[command(flatten)]
+    record: crate::cli_record::RecordFlags,
     /// Live view: window and PNG snapshots.
     #[command(flatten)]
     live: crate::cli_view::LiveArgs,
@@ -86,7 +90,29 @@ pub fn run(args: &SimArgs) -> ExitCode {
         args.speed,
         if args.no_tactile { "off" } else { "on" }
     );
+    let rests: Vec<_> = (0..FINGER_COUNT)
+        .map(|finger| rig::rest_frames(finger, &Params::default(), args.seed))
+        .collect();
+    let recorder = match crate::cli_record::start_recorder(
+        &args.record,
+        "sim",
+        &format!(
+            "dexitac sim --scenario {} --seed {}",
+            scenario.name, args.seed
+        ),
+        &rests,
+        None,
+        &Params::default(),
+    ) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let options = SimOptions {
+        event_tap: recorder.as_ref().map(|r| r.sender()),
+        share_frames: args.record.record_frames,
         tactile_feedback: !args.no_tactile,
         speed: args.speed,
         status: true,
@@ -95,13 +121,20 @@ pub fn run(args: &SimArgs) -> ExitCode {
         stall_tolerance_ms: args.host_silence_ms,
         ..SimOptions::default()
     };
-    let (report, view) = match crate::cli_view::run_sim(&scenario, options, &args.live) {
+    // run_sim drops the options: they hold the last sender of the event tap.
+    let report = crate::cli_view::run_sim(&scenario, options, &args.live);
+    let recorded = crate::cli_record::finish_recorder(recorder, &args.record);
+    let (report, view) = match report {
         Ok(r) => r,
         Err(e) => {
             eprintln!("dexitac sim: {e}");
             return ExitCode::from(2);
         }
     };
+    if let Err(e) = recorded {
+        eprintln!("dexitac sim: {e}");
+        return ExitCode::from(2);
+    }
     if let Err(e) = output::write_all(&report, &args.out) {
         eprintln!("dexitac sim: writing {}: {e}", args.out.display());
         return ExitCode::from(2);

@@ -6,12 +6,11 @@
 //!   safely (the sim's stop flag: valves sealed, MCU disarmed), the results
 //!   are written as usual, and the window then stays up with the last
 //!   picture until closed;
-//! - `dexitac view (--frames DIR [--frames DIR] | --render)`: sensors
-//!   only, no board: frames -> pipeline -> dashboard, with Algorithm 1 run
-//!   on the observations from t = 0 (its decisions are shown; nothing is
-//!   sent anywhere). `--frames`: every PNG/JPEG in name order, the first is
-//!   the rest frame (as `dexitac run --frames`). `--render`: the simulator's
-//!   camera with a scripted press (press, hold, slide, lift).
+//! - `dexitac view (--frames DIR | --camera DEV | --render)` (the sources of
+//!   `dexitac run` and `record`, once or twice): sensors only, no board:
+//!   frames -> pipeline -> dashboard, with Algorithm 1 run on the
+//!   observations from t = 0 (its decisions are shown; nothing is sent
+//!   anywhere).
 //!
 //! Without a display the window cannot open: the command says so and
 //! suggests `--snapshot DIR` (and `--headless` for `view`), which writes the
@@ -20,22 +19,16 @@
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{self, Sender};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::sync::Arc;
 use std::time::Duration;
 
-use dexitac::calibrate;
-use dexitac::frame::GreyFrame;
 use dexitac::grasp::{Grasp, Observation};
 use dexitac::params::Params;
-use dexitac::pipeline::Pipeline;
 use dexitac::protocol::{ArmState, ValveState};
-use dexitac::runtime::{self, Clock, RuntimeEvent, StopReason};
-use dexitac::sim::plant::ContactState;
-use dexitac::sim::render::Renderer;
+use dexitac::runtime::{Clock, RuntimeEvent, Sensor, StopReason};
 use dexitac::sim::rig::{run_scenario, SimOptions, SimReport};
 use dexitac::sim::scenario::Scenario;
-use dexitac::synth::SensorSpec;
 use dexitac::view::{self, live, Dashboard, DashboardConfig, GraspPhase, LiveOptions, Snapshots};
 use dexitac::view::{ViewError, ViewWindow};
 
@@ -59,24 +52,12 @@ pub struct LiveArgs {
 /// Arguments of `dexitac view`.
 #[derive(Debug, clap::Args)]
 pub struct ViewArgs {
-    /// A directory of frames per fingertip (once or twice); the first frame
-    /// in name order is the rest frame.
-    #[arg(
-        long,
-        value_name = "DIR",
-        num_args = 1,
-        required_unless_present = "render"
-    )]
-    frames: Vec<PathBuf>,
-    /// The simulator's camera with a scripted press instead of --frames.
-    #[arg(long, conflicts_with = "frames")]
-    render: bool,
-    /// Frames per second (the frames' time step; the window plays at it).
-    #[arg(long, default_value_t = 30.0, value_parser = parse_fps)]
-    fps: f64,
-    /// Length of the --render script, s.
-    #[arg(long, default_value_t = 13.0, value_parser = parse_duration)]
-    duration_s: f64,
+    #[command(flatten)]
+    sources: crate::cli_sources::SourceArgs,
+    /// Stop after this many seconds of frame time (default: when the frames
+    /// end, the window is closed, or Ctrl-C).
+    #[arg(long, value_name = "S", value_parser = parse_duration)]
+    duration_s: Option<f64>,
     /// Sensor config (TOML, as `dexitac analyze --config`).
     #[arg(long, value_name = "SENSOR.toml")]
     config: Option<PathBuf>,
@@ -86,8 +67,7 @@ pub struct ViewArgs {
     /// Snapshot period, s of frame time (at least 0.01).
     #[arg(long, default_value_t = 2.0, value_name = "S", value_parser = parse_period)]
     snapshot_every_s: f64,
-    /// No window: only the snapshots (needs --snapshot); runs as fast as
-    /// the pipeline goes.
+    /// No window: only the snapshots (needs --snapshot).
     #[arg(long, requires = "snapshot")]
     headless: bool,
 }
@@ -98,15 +78,6 @@ fn parse_period(s: &str) -> Result<f64, String> {
         Ok(v)
     } else {
         Err("the snapshot period must lie in 0.01..=3600 s".into())
-    }
-}
-
-fn parse_fps(s: &str) -> Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
-    if v.is_finite() && (0.1..=1_000.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err("fps must lie in 0.1..=1000".into())
     }
 }
 
@@ -180,7 +151,10 @@ pub fn run_sim(
     let stop = Arc::clone(&options.stop);
     let title = format!("dexitac sim: {}", scenario.name);
     if !args.view && args.snapshot.is_none() {
-        let report = run_scenario(scenario, &options).map_err(|e| e.to_string())?;
+        let report = run_scenario(scenario, &options);
+        // The options hold the last sender of the event tap (the recorder's).
+        drop(options);
+        let report = report.map_err(|e| e.to_string())?;
         let linger = Linger {
             window: None,
             title,
@@ -200,7 +174,8 @@ pub fn run_sim(
         None => None,
     };
     let (tx, rx) = mpsc::channel();
-    options.event_tap = Some(tx);
+    // A recorder already on the tap gets every event too (see `tee`).
+    let recorder_tap = options.event_tap.replace(tx);
     options.share_frames = true;
     let mut dashboard = Dashboard::new(DashboardConfig {
         title: format!("SIM {}", scenario.name.to_ascii_uppercase()),
@@ -213,7 +188,12 @@ pub fn run_sim(
             drop(options);
             report
         });
+        let rx = match recorder_tap {
+            Some(recorder) => tee(scope, rx, recorder),
+            None => rx,
+        };
         let end = {
+            // Dropped after the loop: the run's later events go nowhere.
             let rx = rx;
             live::run(
                 &rx,
@@ -261,195 +241,145 @@ pub fn run_sim(
     })
 }
 
-/// Where a sensor's frames come from in `dexitac view`.
-enum Feed {
-    /// Files, the rest frame already taken off.
-    Files { files: Vec<PathBuf>, next: usize },
-    /// The simulator's camera with the scripted press.
-    Render {
-        renderer: Box<Renderer>,
-        finger: usize,
-    },
+/// Copies every event to `recorder` and returns the view's receiver, on a
+/// thread of its own: the recording does not wait for the view, and goes on
+/// when the view's window is closed.
+fn tee<'scope>(
+    scope: &'scope std::thread::Scope<'scope, '_>,
+    rx: mpsc::Receiver<RuntimeEvent>,
+    recorder: Sender<RuntimeEvent>,
+) -> mpsc::Receiver<RuntimeEvent> {
+    let (tx, view_rx) = mpsc::channel();
+    scope.spawn(move || {
+        for event in rx {
+            // Either side may have closed: the other still gets everything.
+            let _ = recorder.send(event.clone());
+            let _ = tx.send(event);
+        }
+    });
+    view_rx
 }
 
-struct ViewSensor {
-    feed: Feed,
-    pipeline: Pipeline,
-}
+/// How often Algorithm 1's clock ticks without frames (no-contact timeout).
+const TICK: Duration = Duration::from_millis(20);
 
-/// The scripted press of `--render` at `t_s`: touch at 1 s, hold (stable:
-/// seal at about 4 s), slide 1.5 mm at 6 s (a disturbance), hold again,
-/// lift at 11 s (contact lost: release), press again from 12 s.
-fn scripted_contact(finger: usize, t_s: f64) -> Option<ContactState> {
-    let cycle = t_s % 14.0;
-    let pressed = (1.0..11.0).contains(&cycle) || cycle >= 12.0;
-    if !pressed {
-        return None;
+/// Algorithm 1 on the observations: forwards each observation to the view,
+/// followed by the decision it caused, until every sensor thread ended.
+fn relay(observations: Receiver<RuntimeEvent>, clock: Clock, tx: &Sender<RuntimeEvent>) {
+    let mut grasp = Grasp::new(Default::default());
+    grasp.start(0);
+    loop {
+        let (event, decision) = match observations.recv_timeout(TICK) {
+            Ok(event) => {
+                let decision = match &event {
+                    RuntimeEvent::Observation {
+                        sensor,
+                        t_ms,
+                        centre_mm,
+                        ..
+                    } => grasp.observe(
+                        *sensor,
+                        Observation {
+                            t_ms: *t_ms,
+                            centre_mm: *centre_mm,
+                        },
+                    ),
+                    _ => None,
+                };
+                (Some(event), decision)
+            }
+            Err(RecvTimeoutError::Timeout) => (None, grasp.tick(clock.now_ms())),
+            Err(RecvTimeoutError::Disconnected) => return,
+        };
+        // The view may have closed: the sensors end on the stop flag.
+        if let Some(e) = event {
+            let _ = tx.send(e);
+        }
+        if let Some(decision) = decision {
+            let _ = tx.send(RuntimeEvent::Decision {
+                t_ms: decision.t_ms,
+                decision,
+            });
+        }
     }
-    let slide_mm = if cycle < 12.0 {
-        ((cycle - 6.0) / 0.5).clamp(0.0, 1.0) * 1.5
-    } else {
-        0.0
-    };
-    let side = if finger == 0 { 1.0 } else { -1.0 };
-    Some(ContactState {
-        centre_mm: [side * (0.5 + slide_mm), 0.3 * side],
-        shear_mm: [0.0, 0.0],
-        normal_n: 1.5,
-        width_mm: 2.5,
+}
+
+/// Sensors -> pipeline -> Algorithm 1 -> `tx`, one thread per sensor
+/// (`cli_record`'s loop) and one for Algorithm 1; ends with a `Stopped`
+/// event. Returns the first sensor failure.
+fn run_sensors(
+    sensors: Vec<Sensor>,
+    clock: Clock,
+    deadline_ms: Option<u64>,
+    stop: &AtomicBool,
+    tx: Sender<RuntimeEvent>,
+) -> Option<String> {
+    std::thread::scope(|scope| {
+        let (obs_tx, obs_rx) = mpsc::channel();
+        let handles: Vec<_> = sensors
+            .into_iter()
+            .enumerate()
+            .map(|(sensor, s)| {
+                let obs_tx = obs_tx.clone();
+                scope.spawn(move || {
+                    let r = crate::cli_record::sensor_loop(
+                        sensor,
+                        s.source,
+                        &s.pipeline,
+                        clock,
+                        deadline_ms,
+                        stop,
+                        &obs_tx,
+                    );
+                    if r.is_err() {
+                        // One failed sensor ends the view's run.
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                    r
+                })
+            })
+            .collect();
+        drop(obs_tx);
+        let relay_tx = tx.clone();
+        let relay = scope.spawn(move || relay(obs_rx, clock, &relay_tx));
+        let failure = handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err("a sensor thread panicked".into()))
+            })
+            .find_map(Result::err);
+        if relay.join().is_err() {
+            eprintln!("dexitac view: the Algorithm 1 thread panicked");
+        }
+        let outcome = match &failure {
+            Some(e) => Err(e.clone()),
+            None if stop.load(Ordering::Relaxed) => Ok(StopReason::Requested),
+            None => Ok(StopReason::FramesEnded),
+        };
+        // The view may have closed already.
+        let _ = tx.send(RuntimeEvent::Stopped {
+            t_ms: clock.now_ms(),
+            max_loop_gap: Duration::ZERO,
+            outcome,
+        });
+        failure
     })
 }
 
-impl ViewSensor {
-    fn next_frame(&mut self, t_ms: u64, params: &Params) -> Result<Option<GreyFrame>, String> {
-        match &mut self.feed {
-            Feed::Files { files, next } => {
-                let Some(path) = files.get(*next) else {
-                    return Ok(None);
-                };
-                *next += 1;
-                crate::cli_run::load_frame(path, params)
-                    .map(Some)
-                    .map_err(|e| e.to_string())
-            }
-            Feed::Render { renderer, finger } => {
-                let contact = scripted_contact(*finger, t_ms as f64 / 1e3);
-                Ok(Some(renderer.render(contact.as_ref())))
-            }
-        }
-    }
-}
-
-fn view_sensors(args: &ViewArgs, params: &Params) -> Result<Vec<ViewSensor>, String> {
-    let mut out = Vec::new();
-    if args.render {
-        for finger in 0..2 {
-            let mut renderer = Renderer::new(
-                SensorSpec::nominal(
-                    params.frame.work_width_px as usize,
-                    params.frame.work_height_px as usize,
-                ),
-                params.frame.mm_per_px,
-                finger as u64 + 1,
-            );
-            let rest = [renderer.render(None), renderer.render(None)];
-            let cal = calibrate::calibrate(&rest, params).map_err(|e| e.to_string())?;
-            out.push(ViewSensor {
-                feed: Feed::Render {
-                    renderer: Box::new(renderer),
-                    finger,
-                },
-                pipeline: Pipeline::new(cal, params.clone()),
-            });
-        }
-        return Ok(out);
-    }
-    if args.frames.is_empty() || args.frames.len() > 2 {
-        return Err("give --frames once or twice (one directory per fingertip) or --render".into());
-    }
-    for dir in &args.frames {
-        let files = crate::cli_run::image_files(dir)?;
-        let rest = crate::cli_run::load_frame(&files[0], params).map_err(|e| e.to_string())?;
-        let cal = calibrate::calibrate(&[rest], params)
-            .map_err(|e| format!("{}: {e}", files[0].display()))?;
-        out.push(ViewSensor {
-            feed: Feed::Files {
-                files: files[1..].to_vec(),
-                next: 0,
-            },
-            pipeline: Pipeline::new(cal, params.clone()),
-        });
-    }
-    Ok(out)
-}
-
-/// Frames -> pipeline -> events, Algorithm 1 on the observations. Frame
-/// `k` is at `k / fps` s; `paced`: at that wall-clock time too. Returns why
-/// the frames failed, if they did.
-#[allow(clippy::too_many_arguments)]
-fn produce(
-    mut sensors: Vec<ViewSensor>,
-    params: &Params,
-    period_ms: u64,
-    end_ms: Option<u64>,
-    paced: bool,
-    stop: &AtomicBool,
-    tx: &Sender<RuntimeEvent>,
-) -> Option<String> {
-    let clock = Clock::wall();
-    let mut grasp = Grasp::new(Default::default());
-    grasp.start(0);
-    let mut t_ms = 0u64;
-    let outcome = 'frames: loop {
-        if stop.load(Ordering::Relaxed) {
-            break Ok(StopReason::Requested);
-        }
-        if end_ms.is_some_and(|end| t_ms > end) {
-            break Ok(StopReason::FramesEnded);
-        }
-        if paced {
-            clock.sleep_until(t_ms);
-        }
-        let mut any = false;
-        for (sensor, s) in sensors.iter_mut().enumerate() {
-            let frame = match s.next_frame(t_ms, params) {
-                Ok(Some(f)) => f,
-                Ok(None) => continue,
-                Err(e) => break 'frames Err(format!("sensor {sensor}: {e}")),
-            };
-            any = true;
-            let result = match s.pipeline.run(&frame) {
-                Ok(r) => r,
-                Err(e) => break 'frames Err(format!("sensor {sensor}: {e}")),
-            };
-            let centre_mm = result
-                .contact
-                .map(|c| runtime::centre_mm(&s.pipeline, c.centre));
-            let event = RuntimeEvent::Observation {
-                sensor,
-                t_ms,
-                centre_mm,
-                markers: Arc::new(result.markers.positions()),
-                pipeline_ms: result.times.total_ms,
-                contact: result.contact,
-                frame: Some(Arc::new(frame)),
-            };
-            if tx.send(event).is_err() {
-                return None;
-            }
-            if let Some(decision) = grasp.observe(sensor, Observation { t_ms, centre_mm }) {
-                if tx.send(RuntimeEvent::Decision { t_ms, decision }).is_err() {
-                    return None;
-                }
-            }
-        }
-        if !any {
-            break Ok(StopReason::FramesEnded);
-        }
-        if let Some(decision) = grasp.tick(t_ms) {
-            if tx.send(RuntimeEvent::Decision { t_ms, decision }).is_err() {
-                return None;
-            }
-        }
-        t_ms += period_ms;
-    };
-    let failure = outcome.as_ref().err().cloned();
-    // The view may have closed already.
-    let _ = tx.send(RuntimeEvent::Stopped {
-        t_ms,
-        max_loop_gap: Duration::ZERO,
-        outcome,
-    });
-    failure
-}
-
-/// Runs the view; `Ok(false)` when a frame could not be read or processed
-/// (reported on stderr).
+/// Runs the view; `Ok(false)` when a sensor failed (reported on stderr).
 fn run_view(args: &ViewArgs) -> Result<bool, String> {
     let params = match &args.config {
         Some(path) => Params::load(path).map_err(|e| e.to_string())?,
         None => Params::default(),
     };
+    let deadline_ms = args.duration_s.map(|s| (s * 1e3) as u64);
+    let stop = Arc::new(AtomicBool::new(false));
+    crate::cli_sim::stop_on_ctrl_c(&stop);
+    let mut cameras = Vec::new();
+    let setups = crate::cli_sources::open(&args.sources, &params, 1..=2, &stop, &mut cameras)?;
+    let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
+    let (sensors, _) = crate::cli_sources::calibrated(setups, &params)?;
     let title = "dexitac view".to_string();
     let window = if args.headless {
         None
@@ -464,13 +394,8 @@ fn run_view(args: &ViewArgs) -> Result<bool, String> {
         Some(dir) => Some(Snapshots::new(dir, args.snapshot_every_s).map_err(|e| e.to_string())?),
         None => None,
     };
-    let sensors = view_sensors(args, &params)?;
     let mut dashboard = Dashboard::new(DashboardConfig {
-        title: if args.render {
-            "VIEW RENDER (NO BOARD)".into()
-        } else {
-            "VIEW FRAMES (NO BOARD)".into()
-        },
+        title: "VIEW (NO BOARD)".into(),
         params: params.clone(),
         ..DashboardConfig::default()
     });
@@ -479,46 +404,36 @@ fn run_view(args: &ViewArgs) -> Result<bool, String> {
     }
     // Algorithm 1 starts closing at t = 0 (no board: only its decisions show).
     dashboard.set_phase(0, GraspPhase::Closing);
-    let period_ms = ((1e3 / args.fps).round() as u64).max(1);
-    let end_ms = args.render.then_some((args.duration_s * 1e3) as u64);
-    let stop = Arc::new(AtomicBool::new(false));
-    crate::cli_sim::stop_on_ctrl_c(&stop);
-    let paced = window.is_some();
+    eprintln!("dexitac view: {}", labels.join(", "));
+    let clock = Clock::wall();
     let (tx, rx) = mpsc::channel();
     let (end, failure) = std::thread::scope(|scope| {
-        let producer_stop = Arc::clone(&stop);
-        let params = &params;
-        let producer = scope.spawn(move || {
-            produce(
-                sensors,
-                params,
-                period_ms,
-                end_ms,
-                paced,
-                &producer_stop,
-                &tx,
+        let stop_ref = &stop;
+        let producer = scope.spawn(move || run_sensors(sensors, clock, deadline_ms, stop_ref, tx));
+        let end = {
+            // Dropped after the loop: later events go nowhere.
+            let rx = rx;
+            live::run(
+                &rx,
+                &mut dashboard,
+                LiveOptions {
+                    window,
+                    snapshots,
+                    fps: WINDOW_FPS,
+                    stop: Arc::clone(&stop),
+                    lower_priority: false,
+                },
             )
-        });
-        let end = live::run(
-            &rx,
-            &mut dashboard,
-            LiveOptions {
-                window,
-                snapshots,
-                fps: WINDOW_FPS,
-                stop: Arc::clone(&stop),
-                lower_priority: false,
-            },
-        );
+        };
         if end.is_err() {
             stop.store(true, Ordering::Relaxed);
         }
-        drop(rx);
         let failure = producer
             .join()
-            .unwrap_or_else(|_| Some("the frame thread panicked".into()));
+            .unwrap_or_else(|_| Some("the sensor threads panicked".into()));
         (end, failure)
     });
+    crate::cli_sources::print_camera_stats("view", &cameras);
     let end = end.map_err(|e| format!("live view: {e}"))?;
     print_summary("view", &end.summary);
     if let Some(f) = &failure {

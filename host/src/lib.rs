@@ -63,3 +63,9 @@ pub mod manipulation;
 
 // The live view: dashboard, window and PNG snapshots (issue 7, item 4).
 pub mod view;
+// Recording and replay in MCAP (issue 7, items 2b and 3).
+pub mod recording;
+// Tactile cameras, frame-folder replay and sensor setup helpers (issue 7).
+pub mod camera;
+pub mod sensor_setup;
+pub mod sources;

@@ -3,8 +3,11 @@
 mod analyze;
 mod bench_cmd;
 mod cli_kinematics;
+mod cli_record;
 mod cli_run;
+mod cli_sensor;
 mod cli_sim;
+mod cli_sources;
 mod cli_view;
 mod synth_cmd;
 
@@ -53,6 +56,19 @@ enum Command {
     /// Live view of the tactile sensors without a board: frames ->
     /// pipeline -> dashboard (window, or PNG snapshots with --headless).
     View(cli_view::ViewArgs),
+    /// Record the fingertips without a board: frames -> pipeline -> MCAP
+    /// (frames, markers, contact centres; see host/RECORDING.md).
+    Record(cli_record::RecordArgs),
+    /// Run the pipeline again over a recording's frames and compare the
+    /// contact centres with the recorded ones (exit 1 when they differ).
+    Replay(cli_record::ReplayArgs),
+    /// List the tactile cameras (V4L2 capture devices) with their formats
+    /// and sizes. Exit 1 when there is none.
+    Cameras,
+    /// Sensor setup: tune the marker detector to the pin count, check a
+    /// skin's health.
+    #[command(subcommand)]
+    Sensor(cli_sensor::SensorCommand),
 }
 
 /// Arguments of `dexitac analyze`.
@@ -107,6 +123,11 @@ fn main() -> ExitCode {
             cli_kinematics::exit("fit-actuator", cli_kinematics::run_fit(&args))
         }
         Some(Command::View(args)) => cli_view::run(&args),
+        Some(Command::Record(args)) => cli_record::run_record(&args),
+        Some(Command::Replay(args)) => cli_record::run_replay(&args),
+        Some(Command::Cameras) => cli_sensor::cameras(),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Tune(args))) => cli_sensor::tune(&args),
+        Some(Command::Sensor(cli_sensor::SensorCommand::Health(args))) => cli_sensor::health(&args),
         None => {
             println!(
                 "dexitac {}: wire protocol v{}. See `dexitac --help`.",

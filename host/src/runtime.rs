@@ -173,7 +173,18 @@ pub enum SourceError {
 pub trait FrameSource: Send {
     /// Blocks until the next frame; `None` when the source has ended.
     fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError>;
+
+    /// A way to end a blocked [`next_frame`](Self::next_frame) from another
+    /// thread (it then returns `Ok(None)` soon), for sources that can wait
+    /// long (a camera that was unplugged). `None`: the source never blocks
+    /// for long.
+    fn halt_handle(&self) -> Option<HaltHandle> {
+        None
+    }
 }
+
+/// Ends a source's wait for frames (see [`FrameSource::halt_handle`]).
+pub type HaltHandle = Box<dyn Fn() + Send + Sync>;
 
 /// One tactile sensor: its frames and its calibrated pipeline.
 pub struct Sensor {
@@ -780,7 +791,14 @@ pub fn run<P: Port>(
             .filter(|_| config.tactile_feedback)
             .map(Primitive::new),
     };
-    let result = std::thread::scope(|scope| {
+    let halts: Vec<HaltHandle> = sensors
+        .iter()
+        .filter_map(|s| s.source.halt_handle())
+        .collect();
+    // The gripper is sealed and disarmed as soon as the loop ends, before
+    // waiting for the sensor threads (a camera may be blocked on a lost
+    // device until its halt handle is called).
+    let (result, shutdown) = std::thread::scope(|scope| {
         for (i, sensor) in sensors.into_iter().enumerate() {
             let tx = tx.clone();
             let sensor_stop = &sensor_stop;
@@ -789,10 +807,13 @@ pub fn run<P: Port>(
         }
         drop(tx);
         let result = control.run(&rx, stop);
+        let shutdown = control.shutdown();
         sensor_stop.store(true, Ordering::Relaxed);
-        result
+        for halt in &halts {
+            halt();
+        }
+        (result, shutdown)
     });
-    let shutdown = control.shutdown();
     let result = match (result, shutdown) {
         (Err(e), _) => Err(e),
         (Ok(_), Err(e)) => Err(e.into()),

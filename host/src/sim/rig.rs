@@ -279,6 +279,25 @@ fn sensor_spec(finger: usize) -> SensorSpec {
     spec
 }
 
+/// Rest frames a simulated fingertip is calibrated on.
+const REST_FRAMES: usize = 2;
+
+fn renderer(finger: usize, params: &Params, seed: u64) -> Renderer {
+    Renderer::new(
+        sensor_spec(finger),
+        params.frame.mm_per_px,
+        seed.wrapping_mul(31).wrapping_add(finger as u64),
+    )
+}
+
+/// The rest frames simulated fingertip `finger` is calibrated on in a run
+/// with camera seed `seed` (the same frames every time: for recordings,
+/// whose replay recalibrates on them).
+pub fn rest_frames(finger: usize, params: &Params, seed: u64) -> Vec<crate::frame::GreyFrame> {
+    let mut renderer = renderer(finger, params, seed);
+    (0..REST_FRAMES).map(|_| renderer.render(None)).collect()
+}
+
 fn make_sensor(
     finger: usize,
     params: &Params,
@@ -286,12 +305,8 @@ fn make_sensor(
     period_ms: u64,
     seed: u64,
 ) -> Result<(Sensor, Calibration), SimError> {
-    let mut renderer = Renderer::new(
-        sensor_spec(finger),
-        params.frame.mm_per_px,
-        seed.wrapping_mul(31).wrapping_add(finger as u64),
-    );
-    let rest: Vec<_> = (0..2).map(|_| renderer.render(None)).collect();
+    let mut renderer = renderer(finger, params, seed);
+    let rest: Vec<_> = (0..REST_FRAMES).map(|_| renderer.render(None)).collect();
     let calibration =
         calibrate::calibrate(&rest, params).map_err(|source| SimError::Calibration {
             sensor: finger,
