@@ -313,7 +313,7 @@ pub fn locate(
             let radius_px = (r.area_mm2 / std::f64::consts::PI).sqrt() / mm_per_px;
             let reach = radius_px + 2.0 * pitch_px;
             let near = near_markers(rest, field, r.centre, reach);
-            match tracking::radial_centre(rest, field, &near, params.move_noise_px) {
+            match tracking::radial_centre(rest, field, &near, field.moved_px) {
                 Some(fit)
                     if fit.n_inliers >= params.min_moved_markers
                         && fit.inlier_share >= MIN_INLIER_SHARE
@@ -333,8 +333,62 @@ pub fn locate(
     }
 }
 
+/// A tracked marker counts as support of a small contact when its
+/// displacement exceeds this many sigmas of the frame's jitter (below the
+/// "moved" test: the faint ring around a tiny press).
+pub const SUPPORT_SIGMAS: f64 = 3.0;
+/// A marker displaced by more than this many times the "moved" threshold
+/// (24 sigma of the frame's jitter at the default 6 sigma) is *strongly*
+/// moved: a press moves at least one marker this far (a tiny press on or
+/// next to a marker moves it by ~1 px, a press that dents the density by
+/// 1.4 px or more), while noise and the frozen noise of the rest frame
+/// stay below it.
+pub const STRONG_MOVE_FACTOR: f64 = 4.0;
+
+/// Strongly moved is capped at this fraction of the marker pitch (2.25 px
+/// at 15 px): no marker noise moves a marker this far, and a frame where
+/// most markers moved (a press over most of the sensor, which inflates the
+/// jitter estimate) is still looked at.
+pub const STRONG_MOVE_MAX_PITCH: f64 = 0.15;
+
+/// The displacement beyond which a marker is strongly moved, px.
+pub fn strong_move_px(field: &Field, pitch_px: f64) -> f64 {
+    (STRONG_MOVE_FACTOR * field.moved_px).min(STRONG_MOVE_MAX_PITCH * pitch_px)
+}
+
+/// Rest markers (indices) displaced by more than [`strong_move_px`] (lost
+/// markers are not: dropout is not a press).
+pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usize> + '_ {
+    let strong2 = strong_move_px(field, pitch_px).powi(2);
+    field.moved.iter().copied().filter(move |&n| {
+        field
+            .displacement
+            .get(n)
+            .copied()
+            .flatten()
+            // A NaN displacement is looked at, not silently dropped (the
+            // later stages reject it).
+            .is_some_and(|u| {
+                let d2 = u.x * u.x + u.y * u.y;
+                d2 > strong2 || d2.is_nan()
+            })
+    })
+}
+
+/// True when the field may hold a contact: some marker moved strongly
+/// ([`STRONG_MOVE_FACTOR`]). Otherwise the pipeline skips the density
+/// stages (weakly moved or lost markers alone are noise or dropout).
+pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
+    strongly_moved(field, pitch_px).next().is_some()
+}
+
 /// A contact too small for the density: a cluster of consistently radially
-/// displaced markers around the most displaced one.
+/// displaced markers around the most displaced one. The fit uses every
+/// tracked marker within 2.5 pitches of it whose displacement is above
+/// [`SUPPORT_SIGMAS`] of the frame's jitter (not only the "moved" ones), with
+/// a direction tolerance that grows with the jitter
+/// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
+/// through one point.
 fn small_contact(
     rest: &[PointPx],
     field: &Field,
@@ -351,19 +405,38 @@ fn small_contact(
         .iter()
         .filter_map(|&n| Some((n, magnitude(n)?)))
         .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    let near = near_markers(rest, field, rest[seed.0], 3.0 * pitch_px);
-    let fit = tracking::radial_centre(rest, field, &near, params.move_noise_px)?;
+    if seed.1.is_nan() || seed.1 <= strong_move_px(field, pitch_px) {
+        return None;
+    }
+    let support_px = if field.jitter_px > 0.0 {
+        (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
+    } else {
+        field.moved_px
+    };
+    let centre = rest[seed.0];
+    let reach = 2.5 * pitch_px;
+    let near: Vec<usize> = rest
+        .iter()
+        .enumerate()
+        .filter(|&(n, &p)| dist(p, centre) <= reach && magnitude(n).is_some_and(|m| m > support_px))
+        .map(|(n, _)| n)
+        .collect();
+    let fit = tracking::radial_centre_noisy(rest, field, &near, support_px, field.jitter_px)?;
+    let mut d: Vec<f64> = near
+        .iter()
+        .filter(|&&n| magnitude(n).is_some_and(|m| m > field.moved_px))
+        .map(|&n| dist(rest[n], fit.centre))
+        .collect();
     let ok = fit.n_inliers >= params.min_moved_markers
+        && d.len() >= 2
         && fit.inlier_share >= 0.6
-        && dist(fit.centre, rest[seed.0]) <= 1.5 * pitch_px;
+        && dist(fit.centre, centre) <= 1.5 * pitch_px;
     if !ok {
         return None;
     }
-    let mut d: Vec<f64> = near
-        .iter()
-        .filter(|&&n| magnitude(n).is_some_and(|m| m > params.move_noise_px))
-        .map(|&n| dist(rest[n], fit.centre))
-        .collect();
+    if d.is_empty() {
+        return None;
+    }
     let k = d.len() / 2;
     let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
     Some(Contact {
@@ -461,5 +534,37 @@ mod tests {
         let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
         assert!(segment(&map, &rest, &[true; 16], &loose(), 1.0).is_none());
         assert!(segment(&map, &rest, &[true; 3], &loose(), 1.0).is_none());
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn noise_dropout_and_frozen_rest_noise_are_never_a_contact(
+            sigma in 0.0f64..0.1,
+            noisy_share in 0.0f64..0.05,
+            lost_share in 0.0f64..0.1,
+            seed in proptest::prelude::any::<u64>(),
+        ) {
+            // Every marker jitters (Gaussian, sigma per axis, frame and rest
+            // noise; up to twice the 0.05 px of the noisiest synthetic
+            // scenes), a few jitter 3x more (rim, low contrast), some are
+            // lost: nothing moved strongly, the frame is skipped, and the
+            // tracking-only rule finds no contact.
+            let mut rng = crate::synth::Rng::new(seed);
+            let rest = crate::test_fixtures::hex_points(320, 320, 15.0);
+            let mut cur = Vec::new();
+            for p in &rest {
+                if rng.unit() < lost_share {
+                    continue;
+                }
+                let s = if rng.unit() < noisy_share { 3.0 * sigma } else { sigma };
+                cur.push(PointPx::new(p.x + s * rng.normal(), p.y + s * rng.normal()));
+            }
+            let params = ContactParams::default();
+            let field = tracking::track_adaptive(
+                &rest, &cur, 320, 320, 7.5, params.move_noise_px, params.move_noise_sigmas,
+            );
+            proptest::prop_assert!(!worth_a_look(&field, 15.0), "{:?}", field.moved_px);
+            proptest::prop_assert!(locate(None, &rest, &field, 15.0, &params, 0.1).is_none());
+        }
     }
 }
