@@ -67,7 +67,8 @@ pub struct FrameResult {
     pub field: Field,
     /// The contact, if any (working px).
     pub contact: Option<Contact>,
-    /// True when the density stages were skipped (nothing moved, or blank).
+    /// True when the density stages were skipped (no marker moved strongly,
+    /// see [`contact::worth_a_look`], or blank).
     pub skipped: bool,
     /// Fewer than half the rest markers were found (blank, covered or
     /// non-tactile frame): reported as no contact.

@@ -11,13 +11,19 @@
 //! `|u|` exceeds `max(floor, z sigma)`. At z = 6 a Gaussian marker exceeds
 //! it with probability `exp(-18) = 1.5e-8`, so the threshold sits just above
 //! the noise of the frame: a quiet sensor sees the sub-pixel ring around a
-//! tiny contact, a noisy one does not report its noise. The pipeline uses this to skip the
-//! density stages when nothing moved, to restrict the density to a region
-//! around the moved markers, and to find contacts too small to dent the
-//! density. [`radial_centre`] finds the point the displacements radiate
-//! from: the least-squares intersection of the lines through each rest
-//! marker along its displacement, weighted by `|u|^2` and robustly
-//! re-weighted by the residual.
+//! tiny contact, a noisy one does not report its noise. Real jitter has
+//! heavier tails (the rest frame's own noise is frozen into the reference,
+//! rim markers are dimmer), so the pipeline only looks at a frame when some
+//! marker moved *strongly* ([`crate::contact::worth_a_look`]).
+//!
+//! The pipeline uses the field to skip the density stages when nothing moved
+//! strongly, to restrict the density to a region around the strongly moved
+//! markers, and to find contacts too small to dent the density.
+//! [`radial_centre`] finds the point the displacements radiate from: the
+//! least-squares intersection of the lines through each rest marker along its
+//! displacement, weighted by `|u|^2` and robustly re-weighted by the
+//! residual; [`radial_centre_noisy`] lets weak displacements take part with
+//! a tolerance that follows their direction uncertainty.
 
 use crate::PointPx;
 
