@@ -357,22 +357,23 @@ pub fn strong_move_px(field: &Field, pitch_px: f64) -> f64 {
 }
 
 /// Rest markers (indices) displaced by more than [`strong_move_px`] (lost
-/// markers are not: dropout is not a press).
+/// markers are not: dropout is not a press). Scans every tracked marker, not
+/// only `field.moved`: a press over most of the sensor inflates the jitter
+/// estimate and with it the moved threshold, while the strong threshold is
+/// capped.
 pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usize> + '_ {
     let strong2 = strong_move_px(field, pitch_px).powi(2);
-    field.moved.iter().copied().filter(move |&n| {
-        field
-            .displacement
-            .get(n)
-            .copied()
-            .flatten()
+    field
+        .displacement
+        .iter()
+        .enumerate()
+        .filter_map(move |(n, u)| {
+            let u = (*u)?;
+            let d2 = u.x * u.x + u.y * u.y;
             // A NaN displacement is looked at, not silently dropped (the
             // later stages reject it).
-            .is_some_and(|u| {
-                let d2 = u.x * u.x + u.y * u.y;
-                d2 > strong2 || d2.is_nan()
-            })
-    })
+            (d2 > strong2 || d2.is_nan()).then_some(n)
+        })
 }
 
 /// True when the field may hold a contact: some marker moved strongly
@@ -534,6 +535,34 @@ mod tests {
         let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
         assert!(segment(&map, &rest, &[true; 16], &loose(), 1.0).is_none());
         assert!(segment(&map, &rest, &[true; 3], &loose(), 1.0).is_none());
+    }
+
+    #[test]
+    fn a_press_over_most_of_the_sensor_is_still_looked_at() {
+        // 90 % of the markers moved 3 px: the jitter estimate is inflated
+        // (the lower quartile is a moved marker), the strong threshold is
+        // capped at 0.15 pitch, and the frame is not skipped.
+        let rest = crate::test_fixtures::hex_points(200, 200, 15.0);
+        let cur: Vec<PointPx> = rest
+            .iter()
+            .enumerate()
+            .map(|(n, p)| {
+                let d = if n % 10 == 0 { 0.0 } else { 3.0 };
+                PointPx::new(p.x + d, p.y)
+            })
+            .collect();
+        let field = tracking::track_adaptive(&rest, &cur, 200, 200, 7.5, 0.1, 6.0);
+        assert!(6.0 * field.jitter_px > 2.25, "{}", field.jitter_px);
+        assert!((strong_move_px(&field, 15.0) - 2.25).abs() < 1e-12);
+        assert!(worth_a_look(&field, 15.0));
+        // A NaN displacement is looked at (and then rejected downstream),
+        // never silently taken as "not moved".
+        let mut nan = tracking::track_adaptive(&rest, &rest, 200, 200, 7.5, 0.1, 6.0);
+        assert!(!worth_a_look(&nan, 15.0));
+        nan.displacement[3] = Some(PointPx::new(f64::NAN, 0.0));
+        nan.moved.push(3);
+        assert!(worth_a_look(&nan, 15.0));
+        assert!(locate(None, &rest, &nan, 15.0, &ContactParams::default(), 0.1).is_none());
     }
 
     proptest::proptest! {
