@@ -11,12 +11,16 @@
 //!   frame, then one frame per `--fps` period, or at the times in the file
 //!   names with `--recorded-times` (`dexitac::sources`), or with no pause
 //!   with `--max-speed`.
+//! - `--recording FILE.mcap`: the frames of a recording made with frames
+//!   (`dexitac record`, or `--record --record-frames`), every fingertip in
+//!   it, at the recorded pace or with `--max-speed`; the pipeline is
+//!   calibrated on the recorded rest frames (or a fingertip's first frame).
 //! - `--render`: the simulator's camera showing a steady contact, to
 //!   exercise the board, the link or the view without cameras.
 //!
 //! Give `--camera` or `--frames` once per fingertip (sensor 0, then 1).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::mpsc;
 use std::sync::Arc;
@@ -26,6 +30,7 @@ use dexitac::camera::{CameraConfig, CameraStats, CaptureRequest, DeviceId, Pixel
 use dexitac::frame::GreyFrame;
 use dexitac::params::Params;
 use dexitac::pipeline::Pipeline;
+use dexitac::recording::{RecordedFrame, Recording, ReplaySource};
 use dexitac::runtime::{Clock, FrameSource, Sensor, SourceError, TimedFrame};
 use dexitac::sim::plant::ContactState;
 use dexitac::sim::render::Renderer;
@@ -47,13 +52,16 @@ pub struct SourceArgs {
     /// Use the simulator's cameras (a steady contact) instead.
     #[arg(long, conflicts_with_all = ["frames", "camera"])]
     pub render: bool,
+    /// Replay the frames of a recording (MCAP with frames) instead.
+    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["frames", "camera", "render"])]
+    pub recording: Option<PathBuf>,
     /// Frames per second for --frames and --render, and asked of --camera.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
     /// --frames: pace by the `<N>ms` times in the file names (else --fps).
     #[arg(long, conflicts_with = "max_speed")]
     pub recorded_times: bool,
-    /// --frames: no pause between frames.
+    /// --frames, --recording: no pause between frames.
     #[arg(long)]
     pub max_speed: bool,
     /// Camera frame size asked of the driver.
@@ -118,6 +126,17 @@ pub fn open(
         return Ok((0..*counts.end())
             .map(|finger| steady_source(finger, params, period_ms))
             .collect());
+    }
+    if let Some(path) = &args.recording {
+        let setups = recording_sources(path, !args.max_speed)?;
+        if !counts.contains(&setups.len()) {
+            return Err(format!(
+                "{}: {} fingertip(s) with frames recorded, this command takes {how_many}",
+                path.display(),
+                setups.len()
+            ));
+        }
+        return Ok(setups);
     }
     if !args.camera.is_empty() {
         if !counts.contains(&args.camera.len()) {
@@ -240,6 +259,38 @@ fn steady_source(finger: usize, params: &Params, period_ms: u64) -> SourceSetup 
         rest,
         label: format!("simulated sensor {finger}"),
     }
+}
+
+/// Every fingertip with frames in the recording at `path`.
+fn recording_sources(path: &Path, paced: bool) -> Result<Vec<SourceSetup>, String> {
+    let rec = Recording::open(path, false).map_err(|e| e.to_string())?;
+    let mut out = Vec::new();
+    for sensor in rec.sensors() {
+        let Some(first) = rec.frames_of(sensor).next() else {
+            continue;
+        };
+        let rest_frames: Vec<&RecordedFrame> = match rec.rest.get(&sensor) {
+            Some(rest) if !rest.is_empty() => rest.iter().collect(),
+            _ => vec![first],
+        };
+        let rest = rest_frames
+            .iter()
+            .map(|f| f.decode())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| format!("{}: sensor {sensor} rest frame: {e}", path.display()))?;
+        out.push(SourceSetup {
+            source: Box::new(ReplaySource::new(&rec, sensor, paced)),
+            rest,
+            label: format!("{} sensor {sensor}", path.display()),
+        });
+    }
+    if out.is_empty() {
+        return Err(format!(
+            "{}: no frames recorded (record with frames to replay them)",
+            path.display()
+        ));
+    }
+    Ok(out)
 }
 
 /// `640x480` -> (640, 480).

@@ -313,7 +313,7 @@ pub fn locate(
             let radius_px = (r.area_mm2 / std::f64::consts::PI).sqrt() / mm_per_px;
             let reach = radius_px + 2.0 * pitch_px;
             let near = near_markers(rest, field, r.centre, reach);
-            match tracking::radial_centre(rest, field, &near, params.move_noise_px) {
+            match tracking::radial_centre(rest, field, &near, field.moved_px) {
                 Some(fit)
                     if fit.n_inliers >= params.min_moved_markers
                         && fit.inlier_share >= MIN_INLIER_SHARE
@@ -333,8 +333,63 @@ pub fn locate(
     }
 }
 
+/// A tracked marker counts as support of a small contact when its
+/// displacement exceeds this many sigmas of the frame's jitter (below the
+/// "moved" test: the faint ring around a tiny press).
+pub const SUPPORT_SIGMAS: f64 = 3.0;
+/// A marker displaced by more than this many times the "moved" threshold
+/// (24 sigma of the frame's jitter at the default 6 sigma) is *strongly*
+/// moved: a press moves at least one marker this far (a tiny press on or
+/// next to a marker moves it by ~1 px, a press that dents the density by
+/// 1.4 px or more), while noise and the frozen noise of the rest frame
+/// stay below it.
+pub const STRONG_MOVE_FACTOR: f64 = 4.0;
+
+/// Strongly moved is capped at this fraction of the marker pitch (2.25 px
+/// at 15 px): no marker noise moves a marker this far, and a frame where
+/// most markers moved (a press over most of the sensor, which inflates the
+/// jitter estimate) is still looked at.
+pub const STRONG_MOVE_MAX_PITCH: f64 = 0.15;
+
+/// The displacement beyond which a marker is strongly moved, px.
+pub fn strong_move_px(field: &Field, pitch_px: f64) -> f64 {
+    (STRONG_MOVE_FACTOR * field.moved_px).min(STRONG_MOVE_MAX_PITCH * pitch_px)
+}
+
+/// Rest markers (indices) displaced by more than [`strong_move_px`] (lost
+/// markers are not: dropout is not a press). Scans every tracked marker, not
+/// only `field.moved`: a press over most of the sensor inflates the jitter
+/// estimate and with it the moved threshold, while the strong threshold is
+/// capped.
+pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usize> + '_ {
+    let strong2 = strong_move_px(field, pitch_px).powi(2);
+    field
+        .displacement
+        .iter()
+        .enumerate()
+        .filter_map(move |(n, u)| {
+            let u = (*u)?;
+            let d2 = u.x * u.x + u.y * u.y;
+            // A NaN displacement is looked at, not silently dropped (the
+            // later stages reject it).
+            (d2 > strong2 || d2.is_nan()).then_some(n)
+        })
+}
+
+/// True when the field may hold a contact: some marker moved strongly
+/// ([`STRONG_MOVE_FACTOR`]). Otherwise the pipeline skips the density
+/// stages (weakly moved or lost markers alone are noise or dropout).
+pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
+    strongly_moved(field, pitch_px).next().is_some()
+}
+
 /// A contact too small for the density: a cluster of consistently radially
-/// displaced markers around the most displaced one.
+/// displaced markers around the most displaced one. The fit uses every
+/// tracked marker within 2.5 pitches of it whose displacement is above
+/// [`SUPPORT_SIGMAS`] of the frame's jitter (not only the "moved" ones), with
+/// a direction tolerance that grows with the jitter
+/// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
+/// through one point.
 fn small_contact(
     rest: &[PointPx],
     field: &Field,
@@ -351,19 +406,38 @@ fn small_contact(
         .iter()
         .filter_map(|&n| Some((n, magnitude(n)?)))
         .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    let near = near_markers(rest, field, rest[seed.0], 3.0 * pitch_px);
-    let fit = tracking::radial_centre(rest, field, &near, params.move_noise_px)?;
+    if seed.1.is_nan() || seed.1 <= strong_move_px(field, pitch_px) {
+        return None;
+    }
+    let support_px = if field.jitter_px > 0.0 {
+        (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
+    } else {
+        field.moved_px
+    };
+    let centre = rest[seed.0];
+    let reach = 2.5 * pitch_px;
+    let near: Vec<usize> = rest
+        .iter()
+        .enumerate()
+        .filter(|&(n, &p)| dist(p, centre) <= reach && magnitude(n).is_some_and(|m| m > support_px))
+        .map(|(n, _)| n)
+        .collect();
+    let fit = tracking::radial_centre_noisy(rest, field, &near, support_px, field.jitter_px)?;
+    let mut d: Vec<f64> = near
+        .iter()
+        .filter(|&&n| magnitude(n).is_some_and(|m| m > field.moved_px))
+        .map(|&n| dist(rest[n], fit.centre))
+        .collect();
     let ok = fit.n_inliers >= params.min_moved_markers
+        && d.len() >= 2
         && fit.inlier_share >= 0.6
-        && dist(fit.centre, rest[seed.0]) <= 1.5 * pitch_px;
+        && dist(fit.centre, centre) <= 1.5 * pitch_px;
     if !ok {
         return None;
     }
-    let mut d: Vec<f64> = near
-        .iter()
-        .filter(|&&n| magnitude(n).is_some_and(|m| m > params.move_noise_px))
-        .map(|&n| dist(rest[n], fit.centre))
-        .collect();
+    if d.is_empty() {
+        return None;
+    }
     let k = d.len() / 2;
     let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
     Some(Contact {
@@ -461,5 +535,65 @@ mod tests {
         let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
         assert!(segment(&map, &rest, &[true; 16], &loose(), 1.0).is_none());
         assert!(segment(&map, &rest, &[true; 3], &loose(), 1.0).is_none());
+    }
+
+    #[test]
+    fn a_press_over_most_of_the_sensor_is_still_looked_at() {
+        // 90 % of the markers moved 3 px: the jitter estimate is inflated
+        // (the lower quartile is a moved marker), the strong threshold is
+        // capped at 0.15 pitch, and the frame is not skipped.
+        let rest = crate::test_fixtures::hex_points(200, 200, 15.0);
+        let cur: Vec<PointPx> = rest
+            .iter()
+            .enumerate()
+            .map(|(n, p)| {
+                let d = if n % 10 == 0 { 0.0 } else { 3.0 };
+                PointPx::new(p.x + d, p.y)
+            })
+            .collect();
+        let field = tracking::track_adaptive(&rest, &cur, 200, 200, 7.5, 0.1, 6.0);
+        assert!(6.0 * field.jitter_px > 2.25, "{}", field.jitter_px);
+        assert!((strong_move_px(&field, 15.0) - 2.25).abs() < 1e-12);
+        assert!(worth_a_look(&field, 15.0));
+        // A NaN displacement is looked at (and then rejected downstream),
+        // never silently taken as "not moved".
+        let mut nan = tracking::track_adaptive(&rest, &rest, 200, 200, 7.5, 0.1, 6.0);
+        assert!(!worth_a_look(&nan, 15.0));
+        nan.displacement[3] = Some(PointPx::new(f64::NAN, 0.0));
+        nan.moved.push(3);
+        assert!(worth_a_look(&nan, 15.0));
+        assert!(locate(None, &rest, &nan, 15.0, &ContactParams::default(), 0.1).is_none());
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn noise_dropout_and_frozen_rest_noise_are_never_a_contact(
+            sigma in 0.0f64..0.1,
+            noisy_share in 0.0f64..0.05,
+            lost_share in 0.0f64..0.1,
+            seed in proptest::prelude::any::<u64>(),
+        ) {
+            // Every marker jitters (Gaussian, sigma per axis, frame and rest
+            // noise; up to twice the 0.05 px of the noisiest synthetic
+            // scenes), a few jitter 3x more (rim, low contrast), some are
+            // lost: nothing moved strongly, the frame is skipped, and the
+            // tracking-only rule finds no contact.
+            let mut rng = crate::synth::Rng::new(seed);
+            let rest = crate::test_fixtures::hex_points(320, 320, 15.0);
+            let mut cur = Vec::new();
+            for p in &rest {
+                if rng.unit() < lost_share {
+                    continue;
+                }
+                let s = if rng.unit() < noisy_share { 3.0 * sigma } else { sigma };
+                cur.push(PointPx::new(p.x + s * rng.normal(), p.y + s * rng.normal()));
+            }
+            let params = ContactParams::default();
+            let field = tracking::track_adaptive(
+                &rest, &cur, 320, 320, 7.5, params.move_noise_px, params.move_noise_sigmas,
+            );
+            proptest::prop_assert!(!worth_a_look(&field, 15.0), "{:?}", field.moved_px);
+            proptest::prop_assert!(locate(None, &rest, &field, 15.0, &params, 0.1).is_none());
+        }
     }
 }

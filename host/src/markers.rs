@@ -147,7 +147,7 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
             (y0 + y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
         );
         if let Some(pos) = refine(frame, guess, det.radius_px, det.min_contrast) {
-            if taken.claim(pos, DUPLICATE_PX) {
+            if taken.claim(pos, DUPLICATE_PX, &list) {
                 list.push(Marker {
                     pos,
                     strength: d.sqrt(),
@@ -162,11 +162,13 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
 /// Two refined centroids closer than this are one marker, px.
 const DUPLICATE_PX: f64 = 2.0;
 
-/// Coarse occupancy grid for de-duplicating centroids (cells of 4 px).
+/// Coarse occupancy grid for de-duplicating centroids (cells of 4 px); a
+/// cell holds the index + 1 of the first marker claimed in it (0: empty), so
+/// that the grid is small to clear for every frame.
 struct Occupancy {
     cols: usize,
     rows: usize,
-    cells: Vec<Option<PointPx>>,
+    cells: Vec<u32>,
 }
 
 impl Occupancy {
@@ -178,18 +180,21 @@ impl Occupancy {
         Self {
             cols,
             rows,
-            cells: vec![None; cols * rows],
+            cells: vec![0; cols * rows],
         }
     }
 
-    /// Claims `p` unless a claimed point lies within `radius` (<= one cell).
-    fn claim(&mut self, p: PointPx, radius: f64) -> bool {
+    /// Claims `p` as marker `list.len()` unless a claimed marker of `list`
+    /// lies within `radius` (<= one cell).
+    fn claim(&mut self, p: PointPx, radius: f64, list: &[Marker]) -> bool {
         // `as usize` saturates negatives to 0 and truncates (= floor for >= 0).
         let ci = ((p.x / Self::CELL_PX) as usize).min(self.cols - 1);
         let cj = ((p.y / Self::CELL_PX) as usize).min(self.rows - 1);
         for j in cj.saturating_sub(1)..=(cj + 1).min(self.rows - 1) {
             for i in ci.saturating_sub(1)..=(ci + 1).min(self.cols - 1) {
-                if let Some(q) = self.cells[j * self.cols + i] {
+                let k = self.cells[j * self.cols + i];
+                if let Some(q) = (k as usize).checked_sub(1).and_then(|k| list.get(k)) {
+                    let q = q.pos;
                     if (q.x - p.x).powi(2) + (q.y - p.y).powi(2) < radius * radius {
                         return false;
                     }
@@ -197,8 +202,9 @@ impl Occupancy {
             }
         }
         let cell = &mut self.cells[cj * self.cols + ci];
-        if cell.is_none() {
-            *cell = Some(p);
+        if *cell == 0 {
+            // More than u32::MAX - 1 markers cannot fit a frame's cells.
+            *cell = u32::try_from(list.len() + 1).unwrap_or(0);
         }
         true
     }
@@ -215,6 +221,12 @@ fn bright_peaks(
 ) -> Vec<(usize, usize, u8)> {
     const CHUNK: usize = 16;
     let m = margin.max(1);
+    if w <= 2 * m || h <= 2 * m {
+        return Vec::new();
+    }
+    let level = min_level.max(1);
+    let n = w - 2 * m;
+    let mut flags = vec![0u8; n];
     let mut out = Vec::new();
     for y in m..h - m {
         let (up, row, down) = (
@@ -222,31 +234,32 @@ fn bright_peaks(
             &img[y * w..(y + 1) * w],
             &img[(y + 1) * w..(y + 2) * w],
         );
-        let mut start = m;
-        while start < w - m {
-            let end = (start + CHUNK).min(w - m);
-            // Skip dark runs with one vectorisable max.
-            let brightest = row[start..end].iter().fold(0u8, |a, &v| a.max(v));
-            if brightest >= min_level.max(1) {
-                for x in start..end {
-                    let v = row[x];
-                    if v < min_level || v == 0 {
-                        continue;
-                    }
-                    if v > up[x - 1]
-                        && v > up[x]
-                        && v > up[x + 1]
-                        && v > row[x - 1]
-                        && v >= row[x + 1]
-                        && v >= down[x - 1]
-                        && v >= down[x]
-                        && v >= down[x + 1]
-                    {
-                        out.push((x, y, v));
-                    }
-                }
+        // Branch-free over the row (vectorises to byte max / compares):
+        // strictly above the neighbours before it in raster order, at least
+        // as bright as those after it.
+        let before = up[m - 1..]
+            .iter()
+            .zip(&up[m..])
+            .zip(&up[m + 1..])
+            .zip(&row[m - 1..])
+            .map(|(((a, b), c), d)| *a.max(b).max(c).max(d));
+        let after = row[m + 1..]
+            .iter()
+            .zip(&down[m - 1..])
+            .zip(&down[m..])
+            .zip(&down[m + 1..])
+            .map(|(((a, b), c), d)| *a.max(b).max(c).max(d));
+        for (((f, &v), a), b) in flags.iter_mut().zip(&row[m..]).zip(before).zip(after) {
+            *f = u8::from(v > a) & u8::from(v >= b) & u8::from(v >= level);
+        }
+        for (c, chunk) in flags.chunks(CHUNK).enumerate() {
+            if chunk.iter().fold(0u8, |a, &f| a | f) == 0 {
+                continue;
             }
-            start = end;
+            for (i, _) in chunk.iter().enumerate().filter(|(_, &f)| f != 0) {
+                let x = m + c * CHUNK + i;
+                out.push((x, y, row[x]));
+            }
         }
     }
     out
@@ -356,22 +369,21 @@ fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
 fn bin2(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
     let src = frame.data();
     let fw = frame.width();
-    let mut out = Vec::with_capacity(w * h);
-    for y in 0..h {
+    let mut out = vec![0u8; w * h];
+    // Vertical pair sums first (a plain lane-wise add that vectorises), then
+    // the horizontal pairs of those.
+    let mut pair = vec![0u16; 2 * w];
+    for (y, dst) in out.chunks_exact_mut(w).enumerate() {
         let r0 = &src[(y0 + 2 * y) * fw + x0..][..2 * w];
         let r1 = &src[(y0 + 2 * y + 1) * fw + x0..][..2 * w];
-        out.extend(
-            r0.chunks_exact(2)
-                .zip(r1.chunks_exact(2))
-                // 4 x 255 fits u16: wrapping ops only skip the overflow check.
-                .map(|(a, b)| {
-                    let sum = (a[0] as u16)
-                        .wrapping_add(a[1] as u16)
-                        .wrapping_add(b[0] as u16)
-                        .wrapping_add(b[1] as u16);
-                    (sum >> 2) as u8
-                }),
-        );
+        for ((p, &a), &b) in pair.iter_mut().zip(r0).zip(r1) {
+            // 2 x 255 fits u16: wrapping only skips the overflow check.
+            *p = (a as u16).wrapping_add(b as u16);
+        }
+        for (d, p) in dst.iter_mut().zip(pair.chunks_exact(2)) {
+            // 4 x 255 fits u16.
+            *d = (p[0].wrapping_add(p[1]) >> 2) as u8;
+        }
     }
     out
 }

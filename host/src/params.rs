@@ -47,6 +47,17 @@ pub const MM_PER_PX: f64 = 0.1;
 /// Marker pitch of the DigiTac skin, px (Sec. III-B: 15 px between adjacent
 /// markers). Used for matching markers against the rest frame.
 pub const MARKER_PITCH_PX: f64 = 15.0;
+/// Floor of the "marker moved" test, px. Not in the paper: below the
+/// jitter of a marker centroid at 640x480 under strong noise (about 0.05 px
+/// per axis at noise sigma 5) times [`MOVE_NOISE_SIGMAS`], it only matters on
+/// a very quiet sensor, where it keeps sub-0.1 px centroid bias from
+/// counting (BENCHMARKS.md, tactile pipeline).
+pub const MOVE_NOISE_FLOOR_PX: f64 = 0.1;
+/// A marker moved when its displacement exceeds this many sigmas of the
+/// frame's own marker jitter (`tracking::track_adaptive`). Not in the paper;
+/// 6 sigma keeps the expected number of noise-only "moved" markers per frame
+/// (~700 markers) near 1e-5 for Gaussian jitter.
+pub const MOVE_NOISE_SIGMAS: f64 = 6.0;
 /// Stable grasp: contact centre moves less than T1 (Algorithm 1).
 pub const STABLE_SHIFT_MM: f64 = 0.5;
 /// Slip: contact centre moves more than T2 (Algorithm 1).
@@ -227,8 +238,14 @@ pub struct ContactParams {
     pub centre: CentreMethod,
     /// Skip the density stages when no marker moved beyond noise.
     pub skip_unmoved: bool,
-    /// A marker moved when it is further than this from its rest position, px.
+    /// A marker moved when it is further than this from its rest position,
+    /// px, and further than `move_noise_sigmas` times the frame's marker
+    /// jitter (the floor of the noise-aware moved test).
     pub move_noise_px: f64,
+    /// A marker moved when its displacement exceeds this many sigmas of the
+    /// marker jitter estimated on the frame itself (median displacement of
+    /// all tracked markers); 0 = fixed threshold `move_noise_px` only.
+    pub move_noise_sigmas: f64,
     /// Fewer moved markers than this is not a contact.
     pub min_moved_markers: usize,
 }
@@ -242,7 +259,8 @@ impl Default for ContactParams {
             min_area_mm2: 1.0,
             centre: CentreMethod::Hybrid,
             skip_unmoved: true,
-            move_noise_px: 0.3,
+            move_noise_px: MOVE_NOISE_FLOOR_PX,
+            move_noise_sigmas: MOVE_NOISE_SIGMAS,
             min_moved_markers: 3,
         }
     }
@@ -358,6 +376,12 @@ impl Params {
             c.move_noise_px,
             c.move_noise_px.is_finite() && c.move_noise_px > 0.0,
             "must be finite and > 0",
+        )?;
+        check(
+            "contact.move_noise_sigmas",
+            c.move_noise_sigmas,
+            c.move_noise_sigmas.is_finite() && c.move_noise_sigmas >= 0.0,
+            "must be finite and >= 0",
         )?;
         check(
             "contact.min_moved_markers",

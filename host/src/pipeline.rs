@@ -3,11 +3,16 @@
 //! times per stage.
 //!
 //! Skipping what a scene doesn't need:
-//! - when fewer than `min_moved_markers` rest markers moved beyond
-//!   `move_noise_px` (or were lost), the frame has no contact and the density
-//!   and segmentation stages do not run (`skip_unmoved`);
+//! - a marker *moved* when it is displaced beyond `max(move_noise_px,
+//!   move_noise_sigmas x jitter)`, the jitter measured on the frame itself
+//!   ([`tracking::track_adaptive`]); when no marker moved *strongly*
+//!   ([`contact::worth_a_look`]: beyond 4x that, at most 0.15 pitch), the
+//!   frame has no contact and the density and segmentation stages do not run
+//!   (`skip_unmoved`); weakly moved and lost markers alone are noise, the
+//!   rest frame's own noise or dropout;
 //! - otherwise the fast density path only computes the grid cells within
-//!   `2 h` of the moved markers (the exact reference computes everything).
+//!   `2 h` of the strongly moved markers (the exact reference computes
+//!   everything).
 //!
 //! With `skip_unmoved = false` neither shortcut is taken (every frame gets
 //! the full density grid), which is how the saving is measured.
@@ -62,7 +67,8 @@ pub struct FrameResult {
     pub field: Field,
     /// The contact, if any (working px).
     pub contact: Option<Contact>,
-    /// True when the density stages were skipped (nothing moved, or blank).
+    /// True when the density stages were skipped (no marker moved strongly,
+    /// see [`contact::worth_a_look`], or blank).
     pub skipped: bool,
     /// Fewer than half the rest markers were found (blank, covered or
     /// non-tactile frame): reported as no contact.
@@ -107,18 +113,19 @@ impl Pipeline {
         let markers = markers::detect(frame, &cal.detector);
         let t1 = Instant::now();
         let positions = markers.positions();
-        let field = tracking::track(
+        let field = tracking::track_adaptive(
             &cal.rest_markers,
             &positions,
             cal.width,
             cal.height,
             0.5 * cal.pitch_px,
             cp.move_noise_px,
+            cp.move_noise_sigmas,
         );
         // A frame with under half the rest markers is blank, covered or not
         // a tactile image: no contact rather than a guess.
         let blank = 2 * markers.len() < cal.rest_markers.len();
-        let skipped = blank || (cp.skip_unmoved && field.moved.len() < cp.min_moved_markers);
+        let skipped = blank || (cp.skip_unmoved && !contact::worth_a_look(&field, cal.pitch_px));
         let mut density_cells = 0;
         let mut region = None;
         let mut t2 = Instant::now();
@@ -172,7 +179,7 @@ impl Pipeline {
     fn roi(&self, field: &Field) -> CellRect {
         let cal = &self.calibration;
         let grid = cal.density.grid();
-        if !self.params.contact.skip_unmoved || field.moved.is_empty() {
+        if !self.params.contact.skip_unmoved || !contact::worth_a_look(field, cal.pitch_px) {
             return grid.full();
         }
         let (mut x0, mut y0, mut x1, mut y1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
@@ -182,7 +189,7 @@ impl Pipeline {
             x1 = x1.max(p.x);
             y1 = y1.max(p.y);
         };
-        for &n in &field.moved {
+        for n in contact::strongly_moved(field, cal.pitch_px) {
             let r = cal.rest_markers[n];
             grow(r);
             if let Some(u) = field.displacement[n] {
@@ -268,10 +275,30 @@ mod tests {
 
     #[test]
     fn small_contacts_are_found_by_tracking_only() {
-        let e = errors(Category::Small, &Params::default(), 6);
-        let found: Vec<f64> = e.iter().flatten().copied().collect();
-        assert!(found.len() >= 4, "{e:?}");
-        assert!(found.iter().all(|&d| d < 2.0), "{e:?}");
+        // Tiny presses (width 4-8 px) on two sensors: the noise-aware moved
+        // test sees the faint ring around them (BENCHMARKS.md: 199 of 200 over
+        // five seeds; a press right on a marker can move only that marker).
+        let mut found = Vec::new();
+        let mut missed = 0;
+        for sensor_seed in [5, 6] {
+            let cat = Category::Small;
+            let params = Params::default();
+            let sensor = cat.sensor(640, 480, sensor_seed);
+            let rest = synth::rest_frame(&sensor, 99);
+            let cal = crate::calibrate::calibrate(&[rest.image], &params).unwrap();
+            let p = Pipeline::new(cal, params);
+            for k in 0..8 {
+                let f = synth::render(&cat.scene(&sensor, 500 + k));
+                let r = p.run(&f.image).unwrap();
+                match r.contact {
+                    Some(c) => found
+                        .push((f.contacts[0].x - c.centre.x).hypot(f.contacts[0].y - c.centre.y)),
+                    None => missed += 1,
+                }
+            }
+        }
+        assert!(missed <= 1, "missed {missed}, found {found:?}");
+        assert!(found.iter().all(|&d| d < 3.0), "{found:?}");
         let mut density_only = Params::default();
         density_only.contact.centre = crate::params::CentreMethod::Density;
         let e = errors(Category::Small, &density_only, 6);

@@ -213,6 +213,55 @@ fn record_then_replay_on_the_command_line_and_a_truncated_file() {
         "{rows}"
     );
 
+    // The recording as a frame source: recorded again from its own frames
+    // (rest frames and all), the copy replays the same way.
+    let again = dir.path().join("again.mcap");
+    let o = dexitac(&[
+        "record",
+        "--out",
+        again.to_str().unwrap(),
+        "--recording",
+        out.to_str().unwrap(),
+        "--max-speed",
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    assert!(
+        text(&o).contains("6 observation(s), 6 frame(s)"),
+        "{}",
+        text(&o)
+    );
+    let o = dexitac(&["replay", again.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let (first, copy) = (
+        Recording::open(&out, false).unwrap(),
+        Recording::open(&again, false).unwrap(),
+    );
+    // Same frames per sensor (the file interleaves the two sensors in
+    // arrival order, which may differ between the runs).
+    fn frames(r: &Recording) -> Vec<(usize, u64, &[u8])> {
+        let mut f: Vec<(usize, u64, &[u8])> = r
+            .frames
+            .iter()
+            .map(|f| (f.sensor, f.t_ms, f.png.as_slice()))
+            .collect();
+        f.sort_by_key(|f| (f.0, f.1));
+        f
+    }
+    assert_eq!(first.frames.len(), 6);
+    assert!(frames(&first) == frames(&copy), "the frames differ");
+    assert!(first.rest == copy.rest, "the rest frames differ");
+    let centres = |r: &Recording| {
+        r.contacts
+            .iter()
+            .map(|c| (c.sensor, c.t_ms, c.centre_px))
+            .collect::<Vec<_>>()
+    };
+    let (mut c1, mut c2) = (centres(&first), centres(&copy));
+    c1.sort_by_key(|c| (c.0, c.1));
+    c2.sort_by_key(|c| (c.0, c.1));
+    assert_eq!(c1.len(), 6);
+    assert_eq!(c1, c2);
+
     // Other parameters: the replay differs and says so with exit status 1.
     let config = dir.path().join("wide.toml");
     std::fs::write(&config, "[density]\nkernel_width_px = 24.0\n").unwrap();

@@ -183,8 +183,11 @@ fn no_object_releases_ten_seconds_after_closing() {
         "released {} ms after closing",
         t - closing
     );
+    // Released at the first frame after the 10 s timeout: one frame period
+    // on an idle machine; the slack covers sensor threads that a loaded
+    // test machine (several simulations at once on 2 cores) holds up.
     assert!(
-        *t <= closing + 10_500,
+        *t <= closing + 12_000,
         "released {} ms after closing",
         t - closing
     );

@@ -413,9 +413,9 @@ impl Panel {
     }
 }
 
-/// A 3x5 pixel font for the plot's labels: digits, a few capitals and
-/// signs (also used by the live view, [`crate::view`]).
-pub(crate) fn glyph(c: char) -> [u8; 5] {
+/// A 3x5 pixel font for the plot's labels: digits, capitals and a few signs
+/// (also used by the live view, [`crate::view`]).
+fn glyph(c: char) -> [u8; 5] {
     // Each row: 3 bits, the leftmost pixel in bit 2.
     match c {
         '0' => [7, 5, 5, 5, 7],
@@ -458,12 +458,12 @@ pub(crate) fn glyph(c: char) -> [u8; 5] {
         'V' => [5, 5, 5, 5, 2],
         'W' => [5, 5, 7, 7, 5],
         'X' => [5, 5, 2, 5, 5],
-        'J' => [1, 1, 1, 5, 7],
-        'Q' => [7, 5, 5, 7, 1],
         'Y' => [5, 5, 2, 2, 2],
         'Z' => [7, 1, 2, 4, 7],
-        '%' => [5, 1, 2, 4, 5],
+        'J' => [1, 1, 1, 5, 7],
+        'Q' => [7, 5, 5, 7, 1],
         '=' => [0, 7, 0, 7, 0],
+        '%' => [5, 1, 2, 4, 5],
         '>' => [4, 2, 1, 2, 4],
         '<' => [1, 2, 4, 2, 1],
         '_' => [0, 0, 0, 0, 7],
@@ -472,7 +472,9 @@ pub(crate) fn glyph(c: char) -> [u8; 5] {
     }
 }
 
-/// Draws `text` (upper case) with its top-left at (x, y), `scale` px per font pixel.
+/// Draws `text` (upper case) with its top-left at (x, y), `scale` px per
+/// font pixel (4 * scale px per character). Also used by the tactile
+/// benchmark's Pareto plot (`crate::bench::pareto_plot`) and the live view.
 pub(crate) fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) {
     for (i, ch) in text.chars().enumerate() {
         let rows = glyph(ch.to_ascii_uppercase());
