@@ -43,6 +43,7 @@ use dexitac::runtime::{self, Clock, ControlConfig, RuntimeEvent};
 use dexitac_protocol::CHAMBER_COUNT;
 
 use crate::cli_sources::{self, SourceArgs};
+use dexitac::view::{Dashboard, DashboardConfig};
 
 /// Arguments of `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -57,6 +58,9 @@ pub struct RunArgs {
     sources: SourceArgs,
     #[command(flatten)]
     record: crate::cli_record::RecordFlags,
+    /// Live view: window and PNG snapshots.
+    #[command(flatten)]
+    live: crate::cli_view::LiveArgs,
 }
 
 #[derive(Debug, Deserialize)]
@@ -186,7 +190,7 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         None => Params::default(),
     };
     let control = ControlConfig {
-        share_frames: args.record.record_frames,
+        share_frames: args.record.record_frames || args.live.wanted(),
         ..config.control()?
     };
     let stop = Arc::new(AtomicBool::new(false));
@@ -207,47 +211,83 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         config.sensor_config.as_deref(),
         &params,
     )?;
-    let tap = recorder.as_ref().map(|r| r.sender());
-    let (tx, rx) = mpsc::channel::<RuntimeEvent>();
-    let printer = std::thread::spawn(move || {
-        for event in rx {
-            if let Some(tap) = &tap {
-                // A failed recorder reports its error when finished.
-                let _ = tap.send(event.clone());
-            }
-            match event {
-                RuntimeEvent::CommandSent {
-                    t_ms, msg, reason, ..
-                } => {
-                    eprintln!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
-                }
-                RuntimeEvent::Task { t_ms, event } => {
-                    eprintln!("{:9.3} s  task: {event:?}", t_ms as f64 / 1e3);
-                }
-                RuntimeEvent::Stopped {
-                    t_ms,
-                    outcome,
-                    max_loop_gap,
-                } => {
-                    eprintln!(
-                        "{:9.3} s  stopped: {outcome:?} (longest loop stall {:.1} ms)",
-                        t_ms as f64 / 1e3,
-                        max_loop_gap.as_secs_f64() * 1e3
-                    );
-                }
-                _ => {}
-            }
-        }
+    let mut dashboard = Dashboard::new(DashboardConfig {
+        title: "RUN".into(),
+        params: params.clone(),
+        ..DashboardConfig::default()
     });
-    let result = runtime::run(&control, &mut link, sensors, Clock::wall(), &stop, &tx);
-    drop(tx);
-    if printer.join().is_err() {
-        eprintln!("dexitac run: the event printer failed");
+    for (sensor, s) in sensors.iter().enumerate() {
+        dashboard.set_calibration(sensor, &s.pipeline.calibration);
+    }
+    let tap = recorder.as_ref().map(|r| r.sender());
+    let work = |view: Option<mpsc::Sender<RuntimeEvent>>| {
+        let (tx, rx) = mpsc::channel::<RuntimeEvent>();
+        let printer = std::thread::spawn(move || print_events(&rx, tap.as_ref(), view.as_ref()));
+        let result = runtime::run(&control, &mut link, sensors, Clock::wall(), &stop, &tx);
+        drop(tx);
+        if printer.join().is_err() {
+            eprintln!("dexitac run: the event printer failed");
+        }
+        result
+    };
+    let (result, linger) =
+        crate::cli_view::with_live_view(&args.live, "run", dashboard, &stop, work)?;
+    if linger.closed_by_user {
+        eprintln!(
+            "dexitac run: the live view was closed, the run stopped{}",
+            if result.is_ok() {
+                ": valves sealed, MCU disarmed"
+            } else {
+                " (see the error below)"
+            }
+        );
     }
     cli_sources::print_camera_stats("run", &cameras);
     let recorded = crate::cli_record::finish_recorder(recorder, &args.record);
+    linger.wait();
     result.map_err(|e| e.to_string())?;
     recorded
+}
+
+/// Prints the loop's commands, task events and end on stderr, and copies
+/// every event to the recorder and the live view (either may have closed:
+/// the other still gets everything).
+fn print_events(
+    rx: &mpsc::Receiver<RuntimeEvent>,
+    recorder: Option<&mpsc::Sender<RuntimeEvent>>,
+    view: Option<&mpsc::Sender<RuntimeEvent>>,
+) {
+    for event in rx {
+        if let Some(tap) = recorder {
+            // A failed recorder reports its error when finished.
+            let _ = tap.send(event.clone());
+        }
+        if let Some(view) = view {
+            let _ = view.send(event.clone());
+        }
+        match event {
+            RuntimeEvent::CommandSent {
+                t_ms, msg, reason, ..
+            } => {
+                eprintln!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
+            }
+            RuntimeEvent::Task { t_ms, event } => {
+                eprintln!("{:9.3} s  task: {event:?}", t_ms as f64 / 1e3);
+            }
+            RuntimeEvent::Stopped {
+                t_ms,
+                outcome,
+                max_loop_gap,
+            } => {
+                eprintln!(
+                    "{:9.3} s  stopped: {outcome:?} (longest loop stall {:.1} ms)",
+                    t_ms as f64 / 1e3,
+                    max_loop_gap.as_secs_f64() * 1e3
+                );
+            }
+            _ => {}
+        }
+    }
 }
 
 /// Runs the subcommand.

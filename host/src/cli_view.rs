@@ -72,6 +72,84 @@ pub struct ViewArgs {
     headless: bool,
 }
 
+impl LiveArgs {
+    /// True when the view is asked for (window or snapshots): the task loop
+    /// must then share its frames.
+    pub fn wanted(&self) -> bool {
+        self.view || self.snapshot.is_some()
+    }
+}
+
+/// Runs `work` on a thread of its own while the live view (window and/or
+/// snapshots, as `args` asks) shows, on this thread, the events `work`
+/// sends to the sender it is given; closing the window sets `stop`, as
+/// does a failing view (better to end the run safely than to run blind).
+/// Without `--view` and `--snapshot`, `work` runs here with `None`.
+pub fn with_live_view<T: Send>(
+    args: &LiveArgs,
+    command: &str,
+    mut dashboard: Dashboard,
+    stop: &Arc<AtomicBool>,
+    work: impl FnOnce(Option<Sender<RuntimeEvent>>) -> T + Send,
+) -> Result<(T, Linger), String> {
+    let title = format!("dexitac {command}");
+    if !args.wanted() {
+        let out = work(None);
+        let linger = Linger {
+            window: None,
+            title,
+            stop: Arc::clone(stop),
+            closed_by_user: false,
+        };
+        return Ok((out, linger));
+    }
+    // Open the window before the run starts, so a missing display costs nothing.
+    let window = if args.view {
+        let (w, h) = view::Layout.size();
+        Some(ViewWindow::open(&title, w, h).map_err(|e| no_window(&e, "--snapshot DIR"))?)
+    } else {
+        None
+    };
+    let snapshots = match &args.snapshot {
+        Some(dir) => Some(Snapshots::new(dir, args.snapshot_every_s).map_err(|e| e.to_string())?),
+        None => None,
+    };
+    let (tx, rx) = mpsc::channel();
+    std::thread::scope(|scope| {
+        let worker = scope.spawn(move || work(Some(tx)));
+        let end = live::run(
+            &rx,
+            &mut dashboard,
+            LiveOptions {
+                window,
+                snapshots,
+                fps: WINDOW_FPS,
+                stop: Arc::clone(stop),
+                lower_priority: true,
+            },
+        );
+        // Later events go nowhere.
+        drop(rx);
+        if end.is_err() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        let out = worker
+            .join()
+            .map_err(|_| format!("dexitac {command}: the task thread panicked"))?;
+        let end = end.map_err(|e| format!("live view: {e}"))?;
+        print_summary(command, &end.summary);
+        Ok((
+            out,
+            Linger {
+                window: end.window,
+                title,
+                stop: Arc::clone(stop),
+                closed_by_user: end.summary.closed_by_user,
+            },
+        ))
+    })
+}
+
 fn parse_period(s: &str) -> Result<f64, String> {
     let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
     if v.is_finite() && (0.01..=3_600.0).contains(&v) {
@@ -129,6 +207,8 @@ pub struct Linger {
     window: Option<ViewWindow>,
     title: String,
     stop: Arc<AtomicBool>,
+    /// The user closed the window during the run (which stopped it).
+    pub closed_by_user: bool,
 }
 
 impl Linger {
@@ -149,115 +229,56 @@ pub fn run_sim(
     args: &LiveArgs,
 ) -> Result<(SimReport, Linger), String> {
     let stop = Arc::clone(&options.stop);
-    let title = format!("dexitac sim: {}", scenario.name);
-    if !args.view && args.snapshot.is_none() {
-        let report = run_scenario(scenario, &options);
-        // The options hold the last sender of the event tap (the recorder's).
-        drop(options);
-        let report = report.map_err(|e| e.to_string())?;
-        let linger = Linger {
-            window: None,
-            title,
-            stop,
-        };
-        return Ok((report, linger));
-    }
-    // Open the window before the run starts, so a missing display costs nothing.
-    let window = if args.view {
-        let (w, h) = view::Layout.size();
-        Some(ViewWindow::open(&title, w, h).map_err(|e| no_window(&e, "--snapshot DIR"))?)
-    } else {
-        None
-    };
-    let snapshots = match &args.snapshot {
-        Some(dir) => Some(Snapshots::new(dir, args.snapshot_every_s).map_err(|e| e.to_string())?),
-        None => None,
-    };
-    let (tx, rx) = mpsc::channel();
-    // A recorder already on the tap gets every event too (see `tee`).
-    let recorder_tap = options.event_tap.replace(tx);
-    options.share_frames = true;
-    let mut dashboard = Dashboard::new(DashboardConfig {
+    options.share_frames |= args.wanted();
+    let dashboard = Dashboard::new(DashboardConfig {
         title: format!("SIM {}", scenario.name.to_ascii_uppercase()),
         ..DashboardConfig::default()
     });
-    std::thread::scope(|scope| {
-        let sim = scope.spawn(move || {
-            let report = run_scenario(scenario, &options);
-            // The tap's sender goes with the options: the view sees the end.
-            drop(options);
-            report
-        });
-        let rx = match recorder_tap {
-            Some(recorder) => tee(scope, rx, recorder),
-            None => rx,
-        };
-        let end = {
-            // Dropped after the loop: the run's later events go nowhere.
-            let rx = rx;
-            live::run(
-                &rx,
-                &mut dashboard,
-                LiveOptions {
-                    window,
-                    snapshots,
-                    fps: WINDOW_FPS,
-                    stop: Arc::clone(&stop),
-                    lower_priority: true,
-                },
-            )
-        };
-        if end.is_err() {
-            // The view failed: end the run safely rather than run blind.
-            stop.store(true, Ordering::Relaxed);
+    let work = move |view: Option<Sender<RuntimeEvent>>| {
+        if let Some(view) = view {
+            // A recorder already on the tap gets every event too.
+            options.event_tap = Some(match options.event_tap.take() {
+                Some(recorder) => tee(recorder, view),
+                None => view,
+            });
         }
-        let report = sim
-            .join()
-            .map_err(|_| "the simulated rig's thread panicked".to_string())?
-            .map_err(|e| e.to_string())?;
-        let end = end.map_err(|e| format!("live view: {e}"))?;
-        print_summary("sim", &end.summary);
-        if end.summary.closed_by_user {
-            let mcu = &report.mcu_at_end;
-            let safe = mcu.state == ArmState::Disarmed
-                && mcu.chambers.iter().all(|v| *v == ValveState::Hold);
-            eprintln!(
-                "dexitac sim: the live view was closed, the run stopped: {}",
-                if safe {
-                    "valves sealed, MCU disarmed"
-                } else {
-                    "WARNING: the simulated MCU did not end sealed and disarmed"
-                }
-            );
-        }
-        Ok((
-            report,
-            Linger {
-                window: end.window,
-                title,
-                stop,
-            },
-        ))
-    })
+        let report = run_scenario(scenario, &options);
+        // The options hold the last sender of the event tap: the view and
+        // the recorder see the end.
+        drop(options);
+        report
+    };
+    let (report, linger) = with_live_view(args, "sim", dashboard, &stop, work)?;
+    let report = report.map_err(|e| e.to_string())?;
+    if linger.closed_by_user {
+        let mcu = &report.mcu_at_end;
+        let safe =
+            mcu.state == ArmState::Disarmed && mcu.chambers.iter().all(|v| *v == ValveState::Hold);
+        eprintln!(
+            "dexitac sim: the live view was closed, the run stopped: {}",
+            if safe {
+                "valves sealed, MCU disarmed"
+            } else {
+                "WARNING: the simulated MCU did not end sealed and disarmed"
+            }
+        );
+    }
+    Ok((report, linger))
 }
 
-/// Copies every event to `recorder` and returns the view's receiver, on a
-/// thread of its own: the recording does not wait for the view, and goes on
-/// when the view's window is closed.
-fn tee<'scope>(
-    scope: &'scope std::thread::Scope<'scope, '_>,
-    rx: mpsc::Receiver<RuntimeEvent>,
-    recorder: Sender<RuntimeEvent>,
-) -> mpsc::Receiver<RuntimeEvent> {
-    let (tx, view_rx) = mpsc::channel();
-    scope.spawn(move || {
+/// A sender whose events are copied to `recorder` and `view` by a thread of
+/// its own: the recording does not wait for the view, and goes on when the
+/// view's window is closed. The thread ends when the sender is dropped.
+fn tee(recorder: Sender<RuntimeEvent>, view: Sender<RuntimeEvent>) -> Sender<RuntimeEvent> {
+    let (tx, rx) = mpsc::channel::<RuntimeEvent>();
+    std::thread::spawn(move || {
         for event in rx {
             // Either side may have closed: the other still gets everything.
             let _ = recorder.send(event.clone());
-            let _ = tx.send(event);
+            let _ = view.send(event);
         }
     });
-    view_rx
+    tx
 }
 
 /// How often Algorithm 1's clock ticks without frames (no-contact timeout).

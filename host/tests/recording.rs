@@ -308,7 +308,7 @@ impl Drop for Child {
 
 /// `dexitac run --render --record FILE --record-frames` on a simulated
 /// board, until it has closed the fingers for `after_closing`.
-fn recorded_run(dir: &Path, after_closing: Duration) -> (SimMcu, Child, PathBuf) {
+fn recorded_run(dir: &Path, after_closing: Duration, extra: &[&str]) -> (SimMcu, Child, PathBuf) {
     let mcu = SimMcu::spawn(SimMcuConfig {
         // A busy two-core machine may stall the host; the recording is
         // under test here, the silence trip in sim_safety.rs.
@@ -337,6 +337,7 @@ fn recorded_run(dir: &Path, after_closing: Duration) -> (SimMcu, Child, PathBuf)
             .arg(&config)
             .arg("--record")
             .arg(&file)
+            .args(extra)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
@@ -351,11 +352,8 @@ fn recorded_run(dir: &Path, after_closing: Duration) -> (SimMcu, Child, PathBuf)
     (mcu, child, file)
 }
 
-#[test]
-fn run_records_until_ctrl_c_and_a_killed_run_leaves_a_recoverable_file() {
-    let _serial = serial();
-    let dir = tempfile::tempdir().unwrap();
-    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(700));
+/// Sends Ctrl-C to the child and waits for it to exit successfully.
+fn interrupt(child: &mut Child) {
     let pid = i32::try_from(child.0.id()).expect("pid");
     // SAFETY: kill only sends a signal to our own child process.
     assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
@@ -368,6 +366,45 @@ fn run_records_until_ctrl_c_and_a_killed_run_leaves_a_recoverable_file() {
         std::thread::sleep(Duration::from_millis(5));
     };
     assert!(status.success(), "{status:?}");
+}
+
+/// `run` with the live view's snapshots and a recording at once: both get
+/// every event (the recording replays exactly, the snapshots are written).
+#[test]
+fn run_records_and_snapshots_the_live_view_together() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let snaps = dir.path().join("snaps");
+    let (_mcu, mut child, file) = recorded_run(
+        dir.path(),
+        Duration::from_millis(1_000),
+        &[
+            "--snapshot",
+            snaps.to_str().unwrap(),
+            "--snapshot-every-s",
+            "0.5",
+        ],
+    );
+    interrupt(&mut child);
+    let rec = Recording::open(&file, false).expect("a finished recording");
+    assert!(rec.frames.len() >= 4, "{} frames", rec.frames.len());
+    assert_eq!(rec.stopped.len(), 1);
+    let out = replay::replay(&rec, &Params::default(), 1).unwrap();
+    assert!(out.summary.within(0.0), "{:?}", out.summary);
+    let pngs = std::fs::read_dir(&snaps)
+        .expect("the snapshot directory")
+        .filter_map(Result::ok)
+        .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
+        .count();
+    assert!(pngs >= 2, "{pngs} snapshot(s)");
+}
+
+#[test]
+fn run_records_until_ctrl_c_and_a_killed_run_leaves_a_recoverable_file() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().unwrap();
+    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(700), &[]);
+    interrupt(&mut child);
     let rec = Recording::open(&file, false).expect("a finished recording");
     assert_eq!(rec.session.as_ref().unwrap().source, "run");
     let reasons: Vec<&str> = rec.commands.iter().map(|c| c.reason.as_str()).collect();
@@ -381,7 +418,7 @@ fn run_records_until_ctrl_c_and_a_killed_run_leaves_a_recoverable_file() {
 
     // Killed while recording: no summary; refused, then recovered.
     let dir = tempfile::tempdir().unwrap();
-    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(1_500));
+    let (_mcu, mut child, file) = recorded_run(dir.path(), Duration::from_millis(1_500), &[]);
     child.0.kill().expect("kill");
     let _ = child.0.wait();
     match Recording::open(&file, false) {
