@@ -206,9 +206,20 @@ impl Drop for Xvfb {
     }
 }
 
+/// Skips a test whose tool is missing, or fails it when CI asked for the
+/// window tests to run (`DEXITAC_REQUIRE_WINDOW_TESTS=1`, set by `.ci/run`,
+/// which installs Xvfb and xdotool).
+fn skip(why: &str) {
+    assert!(
+        std::env::var_os("DEXITAC_REQUIRE_WINDOW_TESTS").is_none(),
+        "DEXITAC_REQUIRE_WINDOW_TESTS is set but {why}"
+    );
+    eprintln!("skipped: {why}");
+}
+
 fn start_xvfb() -> Option<Xvfb> {
     if !on_path("Xvfb") {
-        eprintln!("skipped: Xvfb is not installed (apt-get install xvfb to run this test)");
+        skip("Xvfb is not installed (apt-get install xvfb to run this test)");
         return None;
     }
     let n = (100..400)
@@ -226,7 +237,7 @@ fn start_xvfb() -> Option<Xvfb> {
     let deadline = Instant::now() + Duration::from_secs(10);
     while !Path::new(&socket).exists() {
         if Instant::now() > deadline {
-            eprintln!("skipped: Xvfb did not start");
+            skip("Xvfb did not start");
             return None;
         }
         std::thread::sleep(Duration::from_millis(50));
@@ -282,7 +293,7 @@ fn on_path(program: &str) -> bool {
 #[test]
 fn closing_the_sim_window_stops_the_run_safely() {
     if !on_path("xdotool") {
-        eprintln!("skipped: xdotool is not installed (it presses Esc in the window)");
+        skip("xdotool is not installed (it presses Esc in the window)");
         return;
     }
     let Some(x) = start_xvfb() else { return };
