@@ -106,7 +106,12 @@ pub fn with_live_view<T: Send>(
     // Open the window before the run starts, so a missing display costs nothing.
     let window = if args.view {
         let (w, h) = view::Layout.size();
-        Some(ViewWindow::open(&title, w, h).map_err(|e| no_window(&e, "--snapshot DIR"))?)
+        let alternative = if command == "view" {
+            "--headless --snapshot DIR"
+        } else {
+            "--snapshot DIR"
+        };
+        Some(ViewWindow::open(&title, w, h).map_err(|e| no_window(&e, alternative))?)
     } else {
         None
     };
@@ -401,20 +406,6 @@ fn run_view(args: &ViewArgs) -> Result<bool, String> {
     let setups = crate::cli_sources::open(&args.sources, &params, 1..=2, &stop, &mut cameras)?;
     let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
     let (sensors, _) = crate::cli_sources::calibrated(setups, &params)?;
-    let title = "dexitac view".to_string();
-    let window = if args.headless {
-        None
-    } else {
-        let (w, h) = view::Layout.size();
-        Some(
-            ViewWindow::open(&title, w, h)
-                .map_err(|e| no_window(&e, "--headless --snapshot DIR"))?,
-        )
-    };
-    let snapshots = match &args.snapshot {
-        Some(dir) => Some(Snapshots::new(dir, args.snapshot_every_s).map_err(|e| e.to_string())?),
-        None => None,
-    };
     let mut dashboard = Dashboard::new(DashboardConfig {
         title: "VIEW (NO BOARD)".into(),
         params: params.clone(),
@@ -426,44 +417,23 @@ fn run_view(args: &ViewArgs) -> Result<bool, String> {
     // Algorithm 1 starts closing at t = 0 (no board: only its decisions show).
     dashboard.set_phase(0, GraspPhase::Closing);
     eprintln!("dexitac view: {}", labels.join(", "));
+    let live = LiveArgs {
+        view: !args.headless,
+        snapshot: args.snapshot.clone(),
+        snapshot_every_s: args.snapshot_every_s,
+    };
     let clock = Clock::wall();
-    let (tx, rx) = mpsc::channel();
-    let (end, failure) = std::thread::scope(|scope| {
-        let stop_ref = &stop;
-        let producer = scope.spawn(move || run_sensors(sensors, clock, deadline_ms, stop_ref, tx));
-        let end = {
-            // Dropped after the loop: later events go nowhere.
-            let rx = rx;
-            live::run(
-                &rx,
-                &mut dashboard,
-                LiveOptions {
-                    window,
-                    snapshots,
-                    fps: WINDOW_FPS,
-                    stop: Arc::clone(&stop),
-                    lower_priority: false,
-                },
-            )
-        };
-        if end.is_err() {
-            stop.store(true, Ordering::Relaxed);
-        }
-        let failure = producer
-            .join()
-            .unwrap_or_else(|_| Some("the sensor threads panicked".into()));
-        (end, failure)
-    });
+    let work = |tx: Option<Sender<RuntimeEvent>>| match tx {
+        Some(tx) => run_sensors(sensors, clock, deadline_ms, &stop, tx),
+        // `--headless` requires `--snapshot`: the view always runs.
+        None => Some("nothing to show: give --snapshot DIR or drop --headless".into()),
+    };
+    let (failure, linger) = with_live_view(&live, "view", dashboard, &stop, work)?;
     crate::cli_sources::print_camera_stats("view", &cameras);
-    let end = end.map_err(|e| format!("live view: {e}"))?;
-    print_summary("view", &end.summary);
     if let Some(f) = &failure {
         eprintln!("dexitac view: {f}");
     }
-    if let Some(w) = end.window {
-        eprintln!("dexitac view: the frames ended; Esc or q closes the window");
-        live::linger(w, &title, &stop);
-    }
+    linger.wait();
     Ok(failure.is_none())
 }
 
