@@ -58,7 +58,17 @@ fn sim_writes_dashboard_snapshots_headless() {
         .and_then(|r| r.split(' ').next())
         .and_then(|n| n.parse().ok())
         .unwrap_or(0);
-    assert!(recorded > 100, "{all}");
+    // Every observation the rig made (`frames` in its summary; fewer on a
+    // loaded machine, so compare rather than assume a rate).
+    let summary = std::fs::read_to_string(out.join("summary.json")).unwrap();
+    let frames: u64 = summary
+        .split("\"frames\":")
+        .nth(1)
+        .and_then(|r| r.trim_start().split([',', '}', '\n']).next())
+        .and_then(|n| n.trim().parse().ok())
+        .expect("frames in summary.json");
+    assert!(frames > 20, "{summary}");
+    assert_eq!(recorded, frames, "{all}");
     let files = pngs(&snaps);
     // One per simulated second (the run ends at 5 s) and one at the end.
     assert!(files.len() >= 5, "{files:?}\n{}", stderr(&o));
