@@ -47,7 +47,7 @@ fn dashboard() -> Dashboard {
             };
             let frame = renderer.render(Some(&contact));
             let r = pipeline.run(&frame).expect("pipeline");
-            d.apply(&RuntimeEvent::Observation {
+            d.apply(&RuntimeEvent::Observation(dexitac::runtime::SensorReport {
                 sensor,
                 t_ms,
                 centre_mm: r.contact.map(|c| runtime::centre_mm(&pipeline, c.centre)),
@@ -55,7 +55,7 @@ fn dashboard() -> Dashboard {
                 pipeline_ms: r.times.total_ms,
                 contact: r.contact,
                 frame: Some(Arc::new(frame)),
-            });
+            }));
         }
     }
     for k in 0..1_000u64 {

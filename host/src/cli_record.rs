@@ -16,7 +16,7 @@ use dexitac::recording::replay::{self, Replay};
 use dexitac::recording::{
     ReadError, RecordOptions, RecordStats, Recorder, RecorderThread, Recording,
 };
-use dexitac::runtime::{self, Clock, FrameSource, RuntimeEvent};
+use dexitac::runtime::{Clock, FrameSource, RuntimeEvent, SensorReport};
 
 /// The recording flags of `dexitac sim` and `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -182,17 +182,13 @@ pub(crate) fn sensor_loop(
         let result = pipeline
             .run(&frame.frame)
             .map_err(|e| format!("sensor {sensor}: frame at {} ms: {e}", frame.t_ms))?;
-        let event = RuntimeEvent::Observation {
+        let event = RuntimeEvent::Observation(SensorReport::new(
             sensor,
-            t_ms: frame.t_ms,
-            centre_mm: result
-                .contact
-                .map(|c| runtime::centre_mm(pipeline, c.centre)),
-            markers: Arc::new(result.markers.positions()),
-            pipeline_ms: result.times.total_ms,
-            contact: result.contact,
-            frame: Some(Arc::new(frame.frame)),
-        };
+            frame.t_ms,
+            pipeline,
+            &result,
+            Some(frame.frame),
+        ));
         if tx.send(event).is_err() {
             return Err("the recorder stopped".into());
         }

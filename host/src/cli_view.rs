@@ -298,16 +298,11 @@ fn relay(observations: Receiver<RuntimeEvent>, clock: Clock, tx: &Sender<Runtime
         let (event, decision) = match observations.recv_timeout(TICK) {
             Ok(event) => {
                 let decision = match &event {
-                    RuntimeEvent::Observation {
-                        sensor,
-                        t_ms,
-                        centre_mm,
-                        ..
-                    } => grasp.observe(
-                        *sensor,
+                    RuntimeEvent::Observation(r) => grasp.observe(
+                        r.sensor,
                         Observation {
-                            t_ms: *t_ms,
-                            centre_mm: *centre_mm,
+                            t_ms: r.t_ms,
+                            centre_mm: r.centre_mm,
                         },
                     ),
                     _ => None,

@@ -75,7 +75,7 @@ use crate::frame::{FrameError, GreyFrame};
 use crate::grasp::{CentreMm, Command, Decision, Grasp, GraspParams, Observation, SENSOR_COUNT};
 use crate::link::{Link, LinkError, McuEvent, Port};
 use crate::manipulation::{Primitive, TaskEvent, TaskParams};
-use crate::pipeline::Pipeline;
+use crate::pipeline::{FrameResult, Pipeline};
 use crate::PointPx;
 
 /// Default grasping chambers: each finger's Rot joint and palm-side Dex bellows.
@@ -276,23 +276,7 @@ pub enum StopReason {
 #[derive(Debug, Clone)]
 pub enum RuntimeEvent {
     /// A sensor's pipeline result.
-    Observation {
-        /// The sensor.
-        sensor: usize,
-        /// Capture time.
-        t_ms: u64,
-        /// The contact centre, mm from the image centre.
-        centre_mm: Option<CentreMm>,
-        /// Detected markers (working px), for density snapshots.
-        markers: Arc<Vec<PointPx>>,
-        /// Pipeline time, ms (wall clock).
-        pipeline_ms: f64,
-        /// The contact in working px (centre, area, how it was found).
-        contact: Option<Contact>,
-        /// The working grey frame, when [`ControlConfig::share_frames`] is
-        /// set (recording, live view); `None` otherwise.
-        frame: Option<Arc<GreyFrame>>,
-    },
+    Observation(SensorReport),
     /// The grasp state machine decided.
     Decision {
         /// When the loop handled it.
@@ -338,17 +322,53 @@ pub enum RuntimeEvent {
     },
 }
 
+/// One sensor's pipeline result on one frame.
+#[derive(Debug, Clone)]
+pub struct SensorReport {
+    /// The sensor.
+    pub sensor: usize,
+    /// Capture time.
+    pub t_ms: u64,
+    /// The contact centre, mm from the image centre.
+    pub centre_mm: Option<CentreMm>,
+    /// Detected markers (working px), for density snapshots.
+    pub markers: Arc<Vec<PointPx>>,
+    /// Pipeline time, ms (wall clock).
+    pub pipeline_ms: f64,
+    /// The contact in working px (centre, area, how it was found).
+    pub contact: Option<Contact>,
+    /// The working grey frame, when [`ControlConfig::share_frames`] is
+    /// set (recording, live view); `None` otherwise.
+    pub frame: Option<Arc<GreyFrame>>,
+}
+
+impl SensorReport {
+    /// The report of `pipeline`'s `result` on the frame captured at `t_ms`;
+    /// `frame` is kept when given (shared frames).
+    pub fn new(
+        sensor: usize,
+        t_ms: u64,
+        pipeline: &Pipeline,
+        result: &FrameResult,
+        frame: Option<GreyFrame>,
+    ) -> Self {
+        SensorReport {
+            sensor,
+            t_ms,
+            centre_mm: result.contact.map(|c| centre_mm(pipeline, c.centre)),
+            markers: Arc::new(result.markers.positions()),
+            pipeline_ms: result.times.total_ms,
+            contact: result.contact,
+            frame: frame.map(Arc::new),
+        }
+    }
+}
+
 /// A sensor thread's message to the link thread.
 enum SensorMsg {
     Report {
-        sensor: usize,
-        t_ms: u64,
         arrived: Instant,
-        centre_mm: Option<CentreMm>,
-        markers: Arc<Vec<PointPx>>,
-        pipeline_ms: f64,
-        contact: Option<Contact>,
-        frame: Option<Arc<GreyFrame>>,
+        report: SensorReport,
     },
     Failed {
         sensor: usize,
@@ -408,14 +428,14 @@ fn sensor_thread(
         let arrived = Instant::now();
         let msg = match setup.pipeline.run(&frame.frame) {
             Ok(result) => SensorMsg::Report {
-                sensor,
-                t_ms: frame.t_ms,
                 arrived,
-                centre_mm: result.contact.map(|c| centre_mm(&setup.pipeline, c.centre)),
-                markers: Arc::new(result.markers.positions()),
-                pipeline_ms: result.times.total_ms,
-                contact: result.contact,
-                frame: share_frames.then(|| Arc::new(frame.frame)),
+                report: SensorReport::new(
+                    sensor,
+                    frame.t_ms,
+                    &setup.pipeline,
+                    &result,
+                    share_frames.then_some(frame.frame),
+                ),
             },
             Err(e) => SensorMsg::Failed {
                 sensor,
@@ -646,25 +666,9 @@ impl<P: Port> Control<'_, P> {
 
     fn on_sensor(&mut self, msg: SensorMsg) -> Result<bool, RuntimeError> {
         match msg {
-            SensorMsg::Report {
-                sensor,
-                t_ms,
-                arrived,
-                centre_mm,
-                markers,
-                pipeline_ms,
-                contact,
-                frame,
-            } => {
-                let _ = self.events.send(RuntimeEvent::Observation {
-                    sensor,
-                    t_ms,
-                    centre_mm,
-                    markers,
-                    pipeline_ms,
-                    contact,
-                    frame,
-                });
+            SensorMsg::Report { arrived, report } => {
+                let (sensor, t_ms, centre_mm) = (report.sensor, report.t_ms, report.centre_mm);
+                let _ = self.events.send(RuntimeEvent::Observation(report));
                 let started = self.task_started();
                 if let Some(e) = self
                     .task

@@ -140,14 +140,10 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
     let mut seen: [Vec<u64>; 2] = [Vec::new(), Vec::new()];
     drop(tx);
     for event in rx.iter() {
-        if let RuntimeEvent::Observation {
-            sensor,
-            t_ms,
-            centre_mm: Some(_),
-            ..
-        } = event
-        {
-            seen[sensor].push(t_ms);
+        if let RuntimeEvent::Observation(r) = event {
+            if r.centre_mm.is_some() {
+                seen[r.sensor].push(r.t_ms);
+            }
         }
     }
     assert!(seen[1].len() >= 30, "sensor 1: {} contacts", seen[1].len());

@@ -312,7 +312,7 @@ fn spawned_recorder_writes_a_channel_of_events() {
     let thread = rec.spawn();
     let tx = thread.sender();
     let (_, pressed) = frames(5, 1);
-    tx.send(RuntimeEvent::Observation {
+    tx.send(RuntimeEvent::Observation(crate::runtime::SensorReport {
         sensor: 1,
         t_ms: 7,
         centre_mm: None,
@@ -320,7 +320,7 @@ fn spawned_recorder_writes_a_channel_of_events() {
         pipeline_ms: 3.0,
         contact: None,
         frame: Some(Arc::new(pressed[0].clone())),
-    })
+    }))
     .unwrap();
     drop(tx);
     let stats = thread.finish().unwrap();

@@ -19,7 +19,7 @@ use crate::frame::GreyFrame;
 use crate::grasp::{Cause, CentreMm, Command, Decision};
 use crate::manipulation::TaskEvent;
 use crate::pipeline::{FrameResult, Pipeline};
-use crate::runtime::{self, RuntimeEvent, StopReason};
+use crate::runtime::{self, RuntimeEvent, SensorReport, StopReason};
 use crate::PointPx;
 
 /// Marker coordinates in the annotations are rounded to this many px
@@ -115,8 +115,9 @@ pub struct RecordStats {
     pub span_ms: u64,
 }
 
-/// One observation to write (the fields of
-/// [`RuntimeEvent::Observation`](crate::runtime::RuntimeEvent::Observation)).
+/// One observation to write: a borrowed [`SensorReport`] (what
+/// [`RuntimeEvent::Observation`] carries), or a frame's pipeline result
+/// without a task loop ([`Recorder::write_frame_result`]).
 #[derive(Debug, Clone, Copy)]
 pub struct ObservationRef<'a> {
     /// The sensor.
@@ -133,6 +134,20 @@ pub struct ObservationRef<'a> {
     pub pipeline_ms: f64,
     /// The working frame, if shared.
     pub frame: Option<&'a GreyFrame>,
+}
+
+impl<'a> From<&'a SensorReport> for ObservationRef<'a> {
+    fn from(r: &'a SensorReport) -> Self {
+        ObservationRef {
+            sensor: r.sensor,
+            t_ms: r.t_ms,
+            centre_mm: r.centre_mm,
+            markers: &r.markers,
+            contact: r.contact.as_ref(),
+            pipeline_ms: r.pipeline_ms,
+            frame: r.frame.as_deref(),
+        }
+    }
 }
 
 /// Writes one MCAP recording.
@@ -303,23 +318,7 @@ impl<W: Write + Seek> Recorder<W> {
     /// Writes one event of the task loop.
     pub fn write_event(&mut self, event: &RuntimeEvent) -> Result<(), RecordError> {
         match event {
-            RuntimeEvent::Observation {
-                sensor,
-                t_ms,
-                centre_mm,
-                markers,
-                pipeline_ms,
-                contact,
-                frame,
-            } => self.write_observation(ObservationRef {
-                sensor: *sensor,
-                t_ms: *t_ms,
-                centre_mm: *centre_mm,
-                markers,
-                contact: contact.as_ref(),
-                pipeline_ms: *pipeline_ms,
-                frame: frame.as_deref(),
-            }),
+            RuntimeEvent::Observation(r) => self.write_observation(ObservationRef::from(r)),
             RuntimeEvent::Decision { t_ms, decision } => {
                 let msg = decision_msg(self.stamp(*t_ms), *t_ms, decision);
                 self.put(topic::DECISION, SchemaKind::Decision, *t_ms, &msg)

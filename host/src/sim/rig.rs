@@ -547,25 +547,18 @@ fn collect(
         }
         let mut l = live.lock().unwrap_or_else(|e| e.into_inner());
         match event {
-            RuntimeEvent::Observation {
-                sensor,
-                t_ms,
-                centre_mm,
-                markers,
-                pipeline_ms,
-                ..
-            } => {
-                if let Some(slot) = l.centres.get_mut(sensor) {
-                    *slot = centre_mm;
+            RuntimeEvent::Observation(r) => {
+                if let Some(slot) = l.centres.get_mut(r.sensor) {
+                    *slot = r.centre_mm;
                 }
-                if let Some(slot) = l.markers.get_mut(sensor) {
-                    *slot = markers;
+                if let Some(slot) = l.markers.get_mut(r.sensor) {
+                    *slot = r.markers;
                 }
                 c.observations.push(ObservationRecord {
-                    sensor,
-                    t_ms,
-                    centre_mm,
-                    pipeline_ms,
+                    sensor: r.sensor,
+                    t_ms: r.t_ms,
+                    centre_mm: r.centre_mm,
+                    pipeline_ms: r.pipeline_ms,
                 });
             }
             RuntimeEvent::Decision { t_ms, decision } => {

@@ -315,24 +315,16 @@ impl Dashboard {
     pub fn apply(&mut self, event: &RuntimeEvent) {
         self.events += 1;
         match event {
-            RuntimeEvent::Observation {
-                sensor,
-                t_ms,
-                centre_mm,
-                markers,
-                pipeline_ms,
-                contact,
-                frame,
-            } => {
-                self.advance(*t_ms);
+            RuntimeEvent::Observation(r) => {
+                self.advance(r.t_ms);
                 self.observe(
-                    *sensor,
-                    *t_ms,
-                    *centre_mm,
-                    markers,
-                    *pipeline_ms,
-                    *contact,
-                    frame.as_ref(),
+                    r.sensor,
+                    r.t_ms,
+                    r.centre_mm,
+                    &r.markers,
+                    r.pipeline_ms,
+                    r.contact,
+                    r.frame.as_ref(),
                 );
             }
             RuntimeEvent::Decision { t_ms, decision } => {
@@ -571,7 +563,7 @@ mod tests {
     }
 
     pub(crate) fn observation(sensor: usize, t_ms: u64, centre: Option<PointPx>) -> RuntimeEvent {
-        RuntimeEvent::Observation {
+        RuntimeEvent::Observation(crate::runtime::SensorReport {
             sensor,
             t_ms,
             centre_mm: centre.map(|c| CentreMm {
@@ -586,7 +578,7 @@ mod tests {
                 source: Source::Density,
             }),
             frame: None,
-        }
+        })
     }
 
     #[test]
@@ -679,7 +671,7 @@ mod tests {
         let mut d = Dashboard::new(DashboardConfig::default());
         d.apply(&observation(7, 0, Some(PointPx::new(1.0, 1.0))));
         d.apply(&observation(0, 10, Some(PointPx::new(f64::NAN, 1.0))));
-        d.apply(&RuntimeEvent::Observation {
+        d.apply(&RuntimeEvent::Observation(crate::runtime::SensorReport {
             sensor: 0,
             t_ms: 20,
             centre_mm: Some(CentreMm {
@@ -690,7 +682,7 @@ mod tests {
             pipeline_ms: f64::NAN,
             contact: None,
             frame: None,
-        });
+        }));
         assert_eq!(d.contact(0), None);
         assert_eq!(d.sensors[0].centre_mm, None);
         assert_eq!(d.sensors[0].pipeline_ms, None);

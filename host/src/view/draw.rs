@@ -777,7 +777,7 @@ mod tests {
     }
 
     fn observation(sensor: usize, t_ms: u64, centre: PointPx, frame: bool) -> RuntimeEvent {
-        RuntimeEvent::Observation {
+        RuntimeEvent::Observation(crate::runtime::SensorReport {
             sensor,
             t_ms,
             centre_mm: Some(CentreMm {
@@ -793,7 +793,7 @@ mod tests {
             }),
             frame: frame
                 .then(|| Arc::new(GreyFrame::new(640, 480, vec![90; 640 * 480]).expect("frame"))),
-        }
+        })
     }
 
     fn telemetry(t_ms: u64, valves: [ValveState; 8], pumps: bool) -> RuntimeEvent {
@@ -896,7 +896,7 @@ mod tests {
         });
         d.apply(&observation(0, 0, PointPx::new(f64::NAN, 3.0), false));
         d.apply(&observation(1, 5, PointPx::new(1e300, -1e300), false));
-        d.apply(&RuntimeEvent::Observation {
+        d.apply(&RuntimeEvent::Observation(crate::runtime::SensorReport {
             sensor: 0,
             t_ms: u64::MAX,
             centre_mm: None,
@@ -906,7 +906,7 @@ mod tests {
             frame: Some(Arc::new(
                 GreyFrame::new(3, 2000, vec![0; 6000]).expect("frame"),
             )),
-        });
+        }));
         d.apply(&telemetry(7, [ValveState::Inflate; 8], true));
         d.apply(&RuntimeEvent::Stopped {
             t_ms: 9,
