@@ -111,8 +111,9 @@ pub struct ImageAnnotations {
     pub circles: Vec<CircleAnnotation>,
     /// The detected markers.
     pub points: Vec<PointsAnnotation>,
-    /// Unused (the format requires the field).
-    pub labels: Vec<serde_json::Value>,
+    /// Text annotations: none (the schema requires the field).
+    #[serde(alias = "labels")]
+    pub texts: Vec<serde_json::Value>,
 }
 
 /// `dexitac.Session`: what the recording holds; the first message.
@@ -309,7 +310,7 @@ impl SchemaKind {
                 r#""timestamp":{TIME},"frame_id":{{"type":"string"}},"data":{{"type":"string","contentEncoding":"base64"}},"format":{{"type":"string"}}"#
             ),
             SchemaKind::ImageAnnotations => format!(
-                r#""circles":{{"type":"array","items":{{"title":"foxglove.CircleAnnotation","type":"object","properties":{{"timestamp":{TIME},"position":{POINT2},"diameter":{{"type":"number"}},"thickness":{{"type":"number"}},"fill_color":{COLOR},"outline_color":{COLOR}}}}}}},"points":{{"type":"array","items":{{"title":"foxglove.PointsAnnotation","type":"object","properties":{{"timestamp":{TIME},"type":{{"title":"foxglove.PointsAnnotationType","oneOf":[{{"title":"UNKNOWN","const":0}},{{"title":"POINTS","const":1}},{{"title":"LINE_LOOP","const":2}},{{"title":"LINE_STRIP","const":3}},{{"title":"LINE_LIST","const":4}}]}},"points":{{"type":"array","items":{POINT2}}},"outline_color":{COLOR},"outline_colors":{{"type":"array","items":{COLOR}}},"fill_color":{COLOR},"thickness":{{"type":"number"}}}}}}}},"labels":{{"type":"array","items":{{"type":"object"}}}}"#
+                r#""circles":{{"type":"array","items":{{"title":"foxglove.CircleAnnotation","type":"object","properties":{{"timestamp":{TIME},"position":{POINT2},"diameter":{{"type":"number"}},"thickness":{{"type":"number"}},"fill_color":{COLOR},"outline_color":{COLOR}}}}}}},"points":{{"type":"array","items":{{"title":"foxglove.PointsAnnotation","type":"object","properties":{{"timestamp":{TIME},"type":{{"title":"foxglove.PointsAnnotationType","oneOf":[{{"title":"UNKNOWN","const":0}},{{"title":"POINTS","const":1}},{{"title":"LINE_LOOP","const":2}},{{"title":"LINE_STRIP","const":3}},{{"title":"LINE_LIST","const":4}}]}},"points":{{"type":"array","items":{POINT2}}},"outline_color":{COLOR},"outline_colors":{{"type":"array","items":{COLOR}}},"fill_color":{COLOR},"thickness":{{"type":"number"}}}}}}}},"texts":{{"type":"array","items":{{"title":"foxglove.TextAnnotation","type":"object"}}}}"#
             ),
             SchemaKind::Session => format!(
                 r#""timestamp":{TIME},"version":{{"type":"string"}},"source":{{"type":"string"}},"description":{{"type":"string"}},"start_unix_ns":{{"type":"integer"}},"frames":{{"type":"boolean"}},"frame_every":{{"type":"integer"}},"mm_per_px":{{"type":"number"}},"sensor_config_toml":{{"type":["string","null"]}}"#

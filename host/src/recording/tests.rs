@@ -328,7 +328,9 @@ fn spawned_recorder_writes_a_channel_of_events() {
     let rec = Recording::open(&path, false).unwrap();
     assert_eq!(rec.frames[0].sensor, 1);
     assert_eq!(rec.frames[0].t_ms, 7);
-    assert_eq!(rec.annotations[&1][0].points[0].points[0].x, 1.23);
+    // Foxglove's origin is the top-left pixel's corner: centre 1.234 -> 1.73.
+    assert_eq!(rec.annotations[&1][0].points[0].points[0].x, 1.73);
+    assert_eq!(rec.annotations[&1][0].points[0].points[0].y, 2.5);
     assert!(!rec.contacts[0].found);
 }
 
@@ -347,4 +349,117 @@ fn paced_replay_waits_for_the_recorded_times() {
     }
     assert_eq!(times, [100, 133, 166, 199]);
     assert!(clock.now_ms() >= 99, "{} ms", clock.now_ms());
+}
+
+/// The subset of JSON Schema that Foxglove's schemas use: `type`,
+/// `required`, `properties`, `items`, `minimum`, `maximum`, `oneOf` of
+/// `const`s. Pushes what `value` breaks to `errors`.
+fn check_schema(
+    value: &serde_json::Value,
+    schema: &serde_json::Value,
+    path: &str,
+    errors: &mut Vec<String>,
+) {
+    use serde_json::Value;
+    if let Some(t) = schema.get("type").and_then(Value::as_str) {
+        let ok = match t {
+            "object" => value.is_object(),
+            "array" => value.is_array(),
+            "string" => value.is_string(),
+            "integer" => value.is_i64() || value.is_u64(),
+            "number" => value.is_number(),
+            "boolean" => value.is_boolean(),
+            _ => true,
+        };
+        if !ok {
+            errors.push(format!("{path}: not a {t}: {value}"));
+            return;
+        }
+    }
+    if let Some(required) = schema.get("required").and_then(Value::as_array) {
+        for key in required.iter().filter_map(Value::as_str) {
+            if value.get(key).is_none() {
+                errors.push(format!("{path}: missing {key}"));
+            }
+        }
+    }
+    if let Some(props) = schema.get("properties").and_then(Value::as_object) {
+        for (key, sub) in props {
+            if let Some(v) = value.get(key) {
+                check_schema(v, sub, &format!("{path}.{key}"), errors);
+            }
+        }
+    }
+    if let (Some(items), Some(values)) = (schema.get("items"), value.as_array()) {
+        for (i, v) in values.iter().enumerate() {
+            check_schema(v, items, &format!("{path}[{i}]"), errors);
+        }
+    }
+    if let Some(x) = value.as_f64() {
+        if schema
+            .get("minimum")
+            .and_then(Value::as_f64)
+            .is_some_and(|m| x < m)
+            || schema
+                .get("maximum")
+                .and_then(Value::as_f64)
+                .is_some_and(|m| x > m)
+        {
+            errors.push(format!("{path}: {x} out of range"));
+        }
+    }
+    if let Some(options) = schema.get("oneOf").and_then(Value::as_array) {
+        let consts: Vec<&Value> = options.iter().filter_map(|o| o.get("const")).collect();
+        if !consts.is_empty() && !consts.contains(&value) {
+            errors.push(format!("{path}: {value} is none of {consts:?}"));
+        }
+    }
+}
+
+/// Every `foxglove.*` message matches Foxglove's own JSON schema
+/// (`host/tests/data/foxglove/`, from `@foxglove/schemas` 2.1.0), so the
+/// Foxglove app shows frames and annotations without setup.
+#[test]
+fn foxglove_messages_have_the_fields_foxglove_requires() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/foxglove");
+    let schema = |name: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(dir.join(format!("{name}.json"))).unwrap())
+            .unwrap()
+    };
+    let schemas = [
+        ("foxglove.CompressedImage", schema("CompressedImage")),
+        ("foxglove.ImageAnnotations", schema("ImageAnnotations")),
+    ];
+    // The checker itself catches a missing required field.
+    let mut errors = Vec::new();
+    check_schema(
+        &serde_json::json!({"circles": [], "points": []}),
+        &schemas[1].1,
+        "probe",
+        &mut errors,
+    );
+    assert_eq!(errors, ["probe: missing texts"]);
+
+    let (bytes, _, _) = record(1);
+    let mut checked = std::collections::BTreeMap::<String, usize>::new();
+    let mut circles = 0;
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let Some(s) = message.channel.schema.as_ref() else {
+            continue;
+        };
+        let Some((_, json_schema)) = schemas.iter().find(|(n, _)| *n == s.name) else {
+            assert!(!s.name.starts_with("foxglove."), "unchecked {}", s.name);
+            continue;
+        };
+        let value: serde_json::Value = serde_json::from_slice(&message.data).unwrap();
+        circles += value["circles"].as_array().map_or(0, Vec::len);
+        let mut errors = Vec::new();
+        check_schema(&value, json_schema, &message.channel.topic, &mut errors);
+        assert!(errors.is_empty(), "{errors:?}");
+        *checked.entry(s.name.clone()).or_default() += 1;
+    }
+    assert!(checked["foxglove.CompressedImage"] >= 4, "{checked:?}");
+    assert_eq!(checked["foxglove.ImageAnnotations"], 4, "{checked:?}");
+    assert!(circles >= 1, "no contact circle to check");
 }

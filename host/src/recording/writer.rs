@@ -535,6 +535,10 @@ fn round_px(v: f64) -> f64 {
     (v / MARKER_ROUND_PX).round() * MARKER_ROUND_PX
 }
 
+/// Foxglove's image annotations put the origin at the top-left corner of
+/// the top-left pixel; our px coordinates have pixel centres at integers.
+const FOXGLOVE_PX_OFFSET: f64 = 0.5;
+
 const MARKER_COLOUR: Color = Color {
     r: 0.1,
     g: 0.8,
@@ -573,8 +577,8 @@ fn annotations(
             CircleAnnotation {
                 timestamp: stamp,
                 position: Point2 {
-                    x: c.centre.x,
-                    y: c.centre.y,
+                    x: c.centre.x + FOXGLOVE_PX_OFFSET,
+                    y: c.centre.y + FOXGLOVE_PX_OFFSET,
                 },
                 diameter: if diameter.is_finite() { diameter } else { 0.0 },
                 thickness: 2.0,
@@ -591,8 +595,8 @@ fn annotations(
             .iter()
             .filter(|p| p.is_finite())
             .map(|p| Point2 {
-                x: round_px(p.x),
-                y: round_px(p.y),
+                x: round_px(p.x + FOXGLOVE_PX_OFFSET),
+                y: round_px(p.y + FOXGLOVE_PX_OFFSET),
             })
             .collect(),
         outline_color: MARKER_COLOUR,
@@ -603,7 +607,7 @@ fn annotations(
     ImageAnnotations {
         circles,
         points,
-        labels: Vec::new(),
+        texts: Vec::new(),
     }
 }
 
