@@ -16,7 +16,7 @@ use dexitac::recording::replay::{self, Replay};
 use dexitac::recording::{
     ReadError, RecordOptions, RecordStats, Recorder, RecorderThread, Recording,
 };
-use dexitac::runtime::{Clock, FrameSource, RuntimeEvent, SensorReport};
+use dexitac::runtime::{Clock, FrameSource, RuntimeEvent, Sensor, SensorReport};
 
 /// The recording flags of `dexitac sim` and `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -197,6 +197,42 @@ pub(crate) fn sensor_loop(
     Ok(n)
 }
 
+/// Runs [`sensor_loop`] for each sensor on a thread of its own, all
+/// sending to `tx`; a failing sensor sets `stop`, which ends the others.
+/// Returns each sensor's frame count or failure, in sensor order.
+pub(crate) fn sensor_threads(
+    sensors: Vec<Sensor>,
+    clock: Clock,
+    deadline_ms: Option<u64>,
+    stop: &AtomicBool,
+    tx: &std::sync::mpsc::Sender<RuntimeEvent>,
+) -> Vec<Result<u64, String>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = sensors
+            .into_iter()
+            .enumerate()
+            .map(|(sensor, s)| {
+                let tx = tx.clone();
+                scope.spawn(move || {
+                    let r =
+                        sensor_loop(sensor, s.source, &s.pipeline, clock, deadline_ms, stop, &tx);
+                    if r.is_err() {
+                        stop.store(true, Ordering::Relaxed);
+                    }
+                    r
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err("a sensor thread panicked".into()))
+            })
+            .collect()
+    })
+}
+
 fn record_inner(args: &RecordArgs) -> Result<(), String> {
     let params = match &args.config {
         Some(path) => Params::load(path).map_err(|e| e.to_string())?,
@@ -225,39 +261,7 @@ fn record_inner(args: &RecordArgs) -> Result<(), String> {
     )?
     .spawn();
     let clock = Clock::wall();
-    let results: Vec<Result<u64, String>> = std::thread::scope(|scope| {
-        let handles: Vec<_> = sensors
-            .into_iter()
-            .enumerate()
-            .map(|(sensor, setup)| {
-                let tx = recorder.sender();
-                let stop = &stop;
-                scope.spawn(move || {
-                    let r = sensor_loop(
-                        sensor,
-                        setup.source,
-                        &setup.pipeline,
-                        clock,
-                        deadline_ms,
-                        stop,
-                        &tx,
-                    );
-                    if r.is_err() {
-                        // One failed sensor ends the recording.
-                        stop.store(true, Ordering::Relaxed);
-                    }
-                    r
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| Err("a sensor thread panicked".into()))
-            })
-            .collect()
-    });
+    let results = sensor_threads(sensors, clock, deadline_ms, &stop, &recorder.sender());
     let stats = recorder.finish().map_err(|e| format!("recording: {e}"))?;
     crate::cli_sources::print_camera_stats("record", &cameras);
     for r in &results {

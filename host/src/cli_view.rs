@@ -337,39 +337,13 @@ fn run_sensors(
 ) -> Option<String> {
     std::thread::scope(|scope| {
         let (obs_tx, obs_rx) = mpsc::channel();
-        let handles: Vec<_> = sensors
-            .into_iter()
-            .enumerate()
-            .map(|(sensor, s)| {
-                let obs_tx = obs_tx.clone();
-                scope.spawn(move || {
-                    let r = crate::cli_record::sensor_loop(
-                        sensor,
-                        s.source,
-                        &s.pipeline,
-                        clock,
-                        deadline_ms,
-                        stop,
-                        &obs_tx,
-                    );
-                    if r.is_err() {
-                        // One failed sensor ends the view's run.
-                        stop.store(true, Ordering::Relaxed);
-                    }
-                    r
-                })
-            })
-            .collect();
-        drop(obs_tx);
         let relay_tx = tx.clone();
         let relay = scope.spawn(move || relay(obs_rx, clock, &relay_tx));
-        let failure = handles
+        let failure = crate::cli_record::sensor_threads(sensors, clock, deadline_ms, stop, &obs_tx)
             .into_iter()
-            .map(|h| {
-                h.join()
-                    .unwrap_or_else(|_| Err("a sensor thread panicked".into()))
-            })
             .find_map(Result::err);
+        // The relay ends when the last sender of observations is gone.
+        drop(obs_tx);
         if relay.join().is_err() {
             eprintln!("dexitac view: the Algorithm 1 thread panicked");
         }
