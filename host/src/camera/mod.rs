@@ -998,40 +998,43 @@ mod tests {
         assert!(CameraStats::get(&counters.opens) >= 2);
     }
 
-    #[test]
-    fn the_halt_handle_ends_a_wait_for_a_lost_camera() {
+    /// Opens a camera unplugged for an hour (with the caller's `stop`
+    /// flag), has another thread call what `end` returns after 100 ms, and
+    /// checks that the waiting `next_frame` returns `None` soon.
+    fn a_lost_camera_wait_ends(
+        stop: Option<Arc<AtomicBool>>,
+        end: impl FnOnce(&CameraSource) -> HaltHandle,
+    ) {
         let fake = FakeDevice::new(PixelFormat::Yuyv, W, H, yuyv_stream(10))
             .unplug_after(0, Duration::from_secs(3600));
-        let mut cam = CameraSource::open(Box::new(fake), &config(0), &params(), None).unwrap();
-        let halt = cam.halt_handle().expect("a camera can be halted");
+        let mut cam = CameraSource::open(Box::new(fake), &config(0), &params(), stop).unwrap();
+        let trigger = end(&cam);
         let setter = std::thread::spawn(move || {
             std::thread::sleep(Duration::from_millis(100));
-            halt();
+            trigger();
         });
         let t0 = Instant::now();
         assert!(cam.next_frame(&Clock::wall()).unwrap().is_none());
         assert!(t0.elapsed() < Duration::from_secs(5));
         setter.join().unwrap();
+        // Dropping joins the capture thread: it must have seen the signal too.
         drop(cam);
     }
 
     #[test]
-    fn the_stop_flag_ends_a_wait_for_a_lost_camera() {
-        let fake = FakeDevice::new(PixelFormat::Yuyv, W, H, yuyv_stream(10))
-            .unplug_after(0, Duration::from_secs(3600));
-        let stop = Arc::new(AtomicBool::new(false));
-        let mut cam =
-            CameraSource::open(Box::new(fake), &config(0), &params(), Some(stop.clone())).unwrap();
-        let setter = std::thread::spawn(move || {
-            std::thread::sleep(Duration::from_millis(100));
-            stop.store(true, Ordering::Relaxed);
+    fn the_halt_handle_ends_a_wait_for_a_lost_camera() {
+        a_lost_camera_wait_ends(None, |cam| {
+            cam.halt_handle().expect("a camera can be halted")
         });
-        let t0 = Instant::now();
-        assert!(cam.next_frame(&Clock::wall()).unwrap().is_none());
-        assert!(t0.elapsed() < Duration::from_secs(5));
-        setter.join().unwrap();
-        // Dropping joins the capture thread: it must have seen the flag too.
-        drop(cam);
+    }
+
+    #[test]
+    fn the_stop_flag_ends_a_wait_for_a_lost_camera() {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        a_lost_camera_wait_ends(Some(stop), move |_| {
+            Box::new(move || flag.store(true, Ordering::Relaxed))
+        });
     }
 
     #[test]
