@@ -97,6 +97,47 @@ fn fake_sensors(
     sensors
 }
 
+/// A finished task loop: its result, its events, the simulated board, and
+/// how long `runtime::run` took.
+struct LoopRun {
+    result: Result<StopReason, runtime::RuntimeError>,
+    events: mpsc::Receiver<RuntimeEvent>,
+    mcu: SimMcu,
+    took: Duration,
+}
+
+/// Runs the task loop on `sensors` against a simulated board until `stop`
+/// is set `after` the start.
+fn run_loop(sensors: Vec<Sensor>, stop: &Arc<AtomicBool>, after: Duration) -> LoopRun {
+    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
+    let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
+    let stopper = {
+        let stop = stop.clone();
+        std::thread::spawn(move || {
+            std::thread::sleep(after);
+            stop.store(true, Ordering::Relaxed);
+        })
+    };
+    let (tx, events) = mpsc::channel();
+    let t0 = std::time::Instant::now();
+    let result = runtime::run(
+        &ControlConfig::default(),
+        &mut link,
+        sensors,
+        Clock::wall(),
+        stop,
+        &tx,
+    );
+    let took = t0.elapsed();
+    stopper.join().unwrap();
+    LoopRun {
+        result,
+        events,
+        mcu,
+        took,
+    }
+}
+
 #[test]
 fn fake_cameras_feed_the_loop_through_an_unplug() {
     let params = Params::default();
@@ -108,26 +149,8 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
         Some(stop.clone()),
         &cam_tx,
     );
-    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
-    let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
-    let stopper = {
-        let stop = stop.clone();
-        std::thread::spawn(move || {
-            std::thread::sleep(Duration::from_millis(2_000));
-            stop.store(true, Ordering::Relaxed);
-        })
-    };
-    let (tx, rx) = mpsc::channel();
-    let result = runtime::run(
-        &ControlConfig::default(),
-        &mut link,
-        sensors,
-        Clock::wall(),
-        &stop,
-        &tx,
-    );
-    stopper.join().unwrap();
-    assert_eq!(result.unwrap(), StopReason::Requested);
+    let run = run_loop(sensors, &stop, Duration::from_millis(2_000));
+    assert_eq!(run.result.unwrap(), StopReason::Requested);
     let camera_events: Vec<CameraEvent> = cam_rx.try_iter().collect();
     assert!(
         matches!(
@@ -138,8 +161,7 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
     );
     // Contact observations per sensor, with their times.
     let mut seen: [Vec<u64>; 2] = [Vec::new(), Vec::new()];
-    drop(tx);
-    for event in rx.iter() {
+    for event in run.events.iter() {
         if let RuntimeEvent::Observation(r) = event {
             if r.centre_mm.is_some() {
                 seen[r.sensor].push(r.t_ms);
@@ -163,7 +185,7 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
         seen[0]
     );
     std::thread::sleep(Duration::from_millis(20));
-    assert_eq!(mcu.snapshot().state, ArmState::Disarmed);
+    assert_eq!(run.mcu.snapshot().state, ArmState::Disarmed);
 }
 
 /// The loop ends (here: stop requested) while a camera is lost for an hour
@@ -175,30 +197,14 @@ fn the_loop_ends_promptly_while_a_camera_is_lost() {
     let params = Params::default();
     let (cam_tx, _cam_rx) = mpsc::channel();
     let sensors = fake_sensors(&params, (10, Duration::from_secs(3600)), None, &cam_tx);
-    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
-    let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
     let stop = Arc::new(AtomicBool::new(false));
-    let stopper = {
-        let stop = stop.clone();
-        std::thread::spawn(move || {
-            std::thread::sleep(Duration::from_millis(1_500));
-            stop.store(true, Ordering::Relaxed);
-        })
-    };
-    let (tx, _rx) = mpsc::channel();
-    let t0 = std::time::Instant::now();
-    let result = runtime::run(
-        &ControlConfig::default(),
-        &mut link,
-        sensors,
-        Clock::wall(),
-        &stop,
-        &tx,
+    let run = run_loop(sensors, &stop, Duration::from_millis(1_500));
+    assert_eq!(run.result.unwrap(), StopReason::Requested);
+    assert!(
+        run.took < Duration::from_secs(30),
+        "run took {:?}",
+        run.took
     );
-    let took = t0.elapsed();
-    stopper.join().unwrap();
-    assert_eq!(result.unwrap(), StopReason::Requested);
-    assert!(took < Duration::from_secs(30), "run took {took:?}");
     std::thread::sleep(Duration::from_millis(20));
-    assert_eq!(mcu.snapshot().state, ArmState::Disarmed);
+    assert_eq!(run.mcu.snapshot().state, ArmState::Disarmed);
 }
