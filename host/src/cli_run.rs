@@ -43,7 +43,6 @@ use dexitac::runtime::{self, Clock, ControlConfig, RuntimeEvent};
 use dexitac_protocol::CHAMBER_COUNT;
 
 use crate::cli_sources::{self, SourceArgs};
-use dexitac::view::{Dashboard, DashboardConfig};
 
 /// Arguments of `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -211,14 +210,7 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         config.sensor_config.as_deref(),
         &params,
     )?;
-    let mut dashboard = Dashboard::new(DashboardConfig {
-        title: "RUN".into(),
-        params: params.clone(),
-        ..DashboardConfig::default()
-    });
-    for (sensor, s) in sensors.iter().enumerate() {
-        dashboard.set_calibration(sensor, &s.pipeline.calibration);
-    }
+    let dashboard = crate::cli_view::calibrated_dashboard("RUN", &params, &sensors);
     let tap = recorder.as_ref().map(|r| r.sender());
     let work = |view: Option<mpsc::Sender<RuntimeEvent>>| {
         let (tx, rx) = mpsc::channel::<RuntimeEvent>();

@@ -226,6 +226,20 @@ impl Linger {
     }
 }
 
+/// A dashboard titled `title` whose heatmaps are relative to each sensor's
+/// own rest calibration.
+pub fn calibrated_dashboard(title: &str, params: &Params, sensors: &[Sensor]) -> Dashboard {
+    let mut dashboard = Dashboard::new(DashboardConfig {
+        title: title.into(),
+        params: params.clone(),
+        ..DashboardConfig::default()
+    });
+    for (sensor, s) in sensors.iter().enumerate() {
+        dashboard.set_calibration(sensor, &s.pipeline.calibration);
+    }
+    dashboard
+}
+
 /// Runs `scenario` on the simulated rig, with the live view and snapshots
 /// when asked for.
 pub fn run_sim(
@@ -375,14 +389,7 @@ fn run_view(args: &ViewArgs) -> Result<bool, String> {
     let setups = crate::cli_sources::open(&args.sources, &params, 1..=2, &stop, &mut cameras)?;
     let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
     let (sensors, _) = crate::cli_sources::calibrated(setups, &params)?;
-    let mut dashboard = Dashboard::new(DashboardConfig {
-        title: "VIEW (NO BOARD)".into(),
-        params: params.clone(),
-        ..DashboardConfig::default()
-    });
-    for (sensor, s) in sensors.iter().enumerate() {
-        dashboard.set_calibration(sensor, &s.pipeline.calibration);
-    }
+    let mut dashboard = calibrated_dashboard("VIEW (NO BOARD)", &params, &sensors);
     // Algorithm 1 starts closing at t = 0 (no board: only its decisions show).
     dashboard.set_phase(0, GraspPhase::Closing);
     eprintln!("dexitac view: {}", labels.join(", "));
