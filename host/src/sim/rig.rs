@@ -294,8 +294,19 @@ fn renderer(finger: usize, params: &Params, seed: u64) -> Renderer {
 /// with camera seed `seed` (the same frames every time: for recordings,
 /// whose replay recalibrates on them).
 pub fn rest_frames(finger: usize, params: &Params, seed: u64) -> Vec<crate::frame::GreyFrame> {
+    renderer_after_rest(finger, params, seed).1
+}
+
+/// Fingertip `finger`'s camera, after it rendered the rest frames (also
+/// returned) that its pipeline is calibrated on.
+fn renderer_after_rest(
+    finger: usize,
+    params: &Params,
+    seed: u64,
+) -> (Renderer, Vec<crate::frame::GreyFrame>) {
     let mut renderer = renderer(finger, params, seed);
-    (0..REST_FRAMES).map(|_| renderer.render(None)).collect()
+    let rest = (0..REST_FRAMES).map(|_| renderer.render(None)).collect();
+    (renderer, rest)
 }
 
 fn make_sensor(
@@ -305,8 +316,7 @@ fn make_sensor(
     period_ms: u64,
     seed: u64,
 ) -> Result<(Sensor, Calibration), SimError> {
-    let mut renderer = renderer(finger, params, seed);
-    let rest: Vec<_> = (0..REST_FRAMES).map(|_| renderer.render(None)).collect();
+    let (renderer, rest) = renderer_after_rest(finger, params, seed);
     let calibration =
         calibrate::calibrate(&rest, params).map_err(|source| SimError::Calibration {
             sensor: finger,
