@@ -1,0 +1,111 @@
+//! `dexitac bench-pipeline`: accuracy against run time (see `dexitac_tactile::bench`).
+
+use std::fmt::Write as _;
+use std::process::ExitCode;
+
+use dexitac_tactile::bench::{self, Pooled, Summary};
+use dexitac_tactile::params::DensityMode;
+use dexitac_tactile::synth::Category;
+
+use crate::BenchArgs;
+
+/// Plot colours, one per setting in `bench::settings()` order.
+const COLOURS: [([u8; 3], &str); 9] = [
+    ([200, 0, 0], "red"),
+    ([255, 140, 0], "orange"),
+    ([150, 100, 50], "brown"),
+    ([200, 200, 0], "olive"),
+    ([0, 160, 160], "teal"),
+    ([0, 0, 220], "blue"),
+    ([140, 0, 200], "purple"),
+    ([255, 0, 200], "magenta"),
+    ([0, 0, 0], "black"),
+];
+
+/// Runs the subcommand.
+pub fn run(args: &BenchArgs) -> ExitCode {
+    match run_inner(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(msg) => {
+            eprintln!("dexitac bench-pipeline: error: {msg}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn run_inner(args: &BenchArgs) -> Result<(), String> {
+    std::fs::create_dir_all(&args.out_dir)
+        .map_err(|e| format!("cannot create {}: {e}", args.out_dir.display()))?;
+    let mut details = String::new();
+    let mut pooled: Vec<Pooled> = Vec::new();
+    for setting in bench::settings() {
+        let exact = setting.params.density.mode == DensityMode::Exact;
+        let frames = if exact {
+            args.exact_frames
+        } else {
+            args.frames
+        };
+        eprintln!(
+            "bench-pipeline: {} ({frames} frames per scene)",
+            setting.name
+        );
+        let samples = bench::evaluate(&setting, &Category::ALL, frames, 640, 480, args.seed)
+            .map_err(|e| e.to_string())?;
+        let sums: Vec<Summary> = Category::ALL
+            .iter()
+            .map(|&c| bench::summarize(c, &samples))
+            .collect();
+        let _ = writeln!(details, "{}", bench::markdown(setting.name, &sums));
+        pooled.push(bench::pool(setting.name, &samples));
+    }
+    let mut report = String::new();
+    let _ = writeln!(
+        report,
+        "### Pareto (640x480, seed {}, {} frames per scene, {} for exact)\n",
+        args.seed, args.frames, args.exact_frames
+    );
+    let _ = writeln!(report, "{}", bench::pareto_markdown(&pooled));
+    let _ = writeln!(report, "Plot colours (pareto.png):");
+    for (p, (_, name)) in pooled.iter().zip(COLOURS) {
+        let _ = writeln!(report, "- {name}: {}", p.name);
+    }
+    let _ = writeln!(report, "\n### Time against image size (default setting)\n");
+    let _ = writeln!(
+        report,
+        "| size | contact: detect | kde | segment | total ms | no contact: total ms |"
+    );
+    let _ = writeln!(report, "|---|---|---|---|---|---|");
+    for (w, h) in [(320, 240), (640, 480), (1280, 960)] {
+        eprintln!("bench-pipeline: timing {w}x{h}");
+        let (c, n) =
+            bench::time_at_size(w, h, args.frames, args.seed).map_err(|e| e.to_string())?;
+        let _ = writeln!(
+            report,
+            "| {w}x{h} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
+            c.detect_ms, c.kde_ms, c.segment_ms, c.total_ms, n.total_ms
+        );
+    }
+    let _ = writeln!(
+        report,
+        "\n### Fast density path against the exact f64 reference (640x480, 3 nominal frames)\n"
+    );
+    let _ = writeln!(
+        report,
+        "| grid step px | max abs diff / rest density | mean abs diff / rest density |"
+    );
+    let _ = writeln!(report, "|---|---|---|");
+    for (step, worst, mean) in bench::density_difference(&[1, 2, 4, 8], 3, args.seed) {
+        let _ = writeln!(report, "| {step} | {worst:.2e} | {mean:.2e} |");
+    }
+    let _ = writeln!(report, "\n### Per scene\n\n{details}");
+    print!("{report}");
+    let colours: Vec<[u8; 3]> = COLOURS.iter().map(|c| c.0).collect();
+    let plot = dexitac_view::figures::pareto::pareto_plot(&pooled, &colours);
+    let png = args.out_dir.join("pareto.png");
+    plot.save(&png)
+        .map_err(|e| format!("cannot write {}: {e}", png.display()))?;
+    std::fs::write(args.out_dir.join("results.md"), &report)
+        .map_err(|e| format!("cannot write results.md: {e}"))?;
+    eprintln!("bench-pipeline: wrote {} and results.md", png.display());
+    Ok(())
+}

@@ -1,0 +1,266 @@
+//! `dexitac cameras` and `dexitac sensor tune | health`.
+//!
+//! - `cameras`: lists the V4L2 video capture devices (`/dev/video*`) with
+//!   name, bus, formats and frame sizes. Exit 0 when it found one, 1 when
+//!   there is none ("no capture devices found") or on a non-Linux system.
+//! - `sensor tune --rest REST.png --pins N [--config SENSOR.toml] [--out
+//!   OUT.toml]`: tunes the marker detector so the rest frame shows the
+//!   skin's N pins ([`dexitac_tactile::sensor_setup::tune`]); writes the sensor
+//!   config (all fields, the base config's values elsewhere) to `--out`, or
+//!   to stdout. Exit 0 when the count is matched exactly, 1 when only the
+//!   closest count was found (the config is still written), 2 on bad input.
+//! - `sensor health --rest REST.png [--config SENSOR.toml] [--pins N]
+//!   [FRAME...]`: checks current no-contact frames (files or folders)
+//!   against the rest frame ([`dexitac_tactile::sensor_setup::health`]). Exit 0
+//!   pass, 1 warn, 2 fail, 3 when the check could not run (bad input).
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use dexitac_rig::sources;
+use dexitac_tactile::frame::GreyFrame;
+use dexitac_tactile::params::Params;
+use dexitac_tactile::sensor_setup::{self, HealthLimits, HealthReport, Verdict};
+use dexitac_tactile::PointPx;
+
+/// `dexitac sensor` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum SensorCommand {
+    /// Tune the marker detector to the skin's known pin count on a rest
+    /// frame; writes a sensor config for `analyze --config` and `run`.
+    Tune(TuneArgs),
+    /// Check a skin: missing, merged, extra or damaged markers, sensing-area
+    /// coverage and marker jitter against the rest frame. Exit 0 pass, 1
+    /// warn, 2 fail, 3 error.
+    Health(HealthArgs),
+}
+
+/// Arguments of `dexitac sensor tune`.
+#[derive(Debug, clap::Args)]
+pub struct TuneArgs {
+    /// Rest (no-contact) frame.
+    #[arg(long, value_name = "REST.png")]
+    rest: PathBuf,
+    /// Number of pins (markers) on the skin.
+    #[arg(long, value_name = "N")]
+    pins: usize,
+    /// Base sensor config (TOML); defaults to the paper's parameters.
+    #[arg(long, value_name = "SENSOR.toml")]
+    config: Option<PathBuf>,
+    /// Where to write the tuned config (default: stdout).
+    #[arg(long, value_name = "OUT.toml")]
+    out: Option<PathBuf>,
+}
+
+/// Arguments of `dexitac sensor health`.
+#[derive(Debug, clap::Args)]
+pub struct HealthArgs {
+    /// Reference rest (no-contact) frame.
+    #[arg(long, value_name = "REST.png")]
+    rest: PathBuf,
+    /// Sensor config (TOML); defaults to the paper's parameters.
+    #[arg(long, value_name = "SENSOR.toml")]
+    config: Option<PathBuf>,
+    /// The skin's pin count, to check the rest frame against.
+    #[arg(long, value_name = "N")]
+    pins: Option<usize>,
+    /// Fail below this sensing-area coverage, percent.
+    #[arg(long, default_value_t = 98.0)]
+    min_coverage_pct: f64,
+    /// Warn above this marker jitter, px.
+    #[arg(long, default_value_t = 0.5)]
+    max_jitter_px: f64,
+    /// Current no-contact frames to check (files or folders; none: the
+    /// rest frame itself).
+    #[arg(value_name = "FRAME")]
+    frames: Vec<PathBuf>,
+}
+
+fn load_params(config: Option<&Path>) -> Result<Params, String> {
+    match config {
+        Some(path) => Params::load(path).map_err(|e| e.to_string()),
+        None => Ok(Params::default()),
+    }
+}
+
+fn load(path: &Path, params: &Params) -> Result<GreyFrame, String> {
+    sources::load_frame(path, &params.frame).map_err(|e| e.to_string())
+}
+
+/// Runs `dexitac sensor tune`.
+pub fn tune(args: &TuneArgs) -> ExitCode {
+    match tune_inner(args) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        Err(msg) => {
+            eprintln!("dexitac sensor tune: {msg}");
+            ExitCode::from(2)
+        }
+    }
+}
+
+fn tune_inner(args: &TuneArgs) -> Result<bool, String> {
+    let base = load_params(args.config.as_deref())?;
+    let rest = load(&args.rest, &base)?;
+    let before = sensor_setup::count_markers(&rest, &base.markers);
+    let r = sensor_setup::tune(&rest, args.pins, &base).map_err(|e| e.to_string())?;
+    let tuned = Params {
+        markers: r.markers.clone(),
+        ..base
+    };
+    let lobe = r.markers.lobe_px.map_or("auto".into(), |l| l.to_string());
+    let summary = format!(
+        "{}: {} of {} pins found (the base config found {before}); lobe_px = {lobe}, \
+         strength_ratio = {:.2}{}, min_contrast = {}; {} settings tried",
+        args.rest.display(),
+        r.found,
+        r.pins,
+        r.markers.strength_ratio,
+        r.ratio_range.map_or(String::new(), |(lo, hi)| format!(
+            " (exact for {lo:.2}..={hi:.2})"
+        )),
+        r.markers.min_contrast,
+        r.tried
+    );
+    let text = sensor_setup::params_toml(
+        &tuned,
+        &format!("Sensor config tuned by `dexitac sensor tune`.\n{summary}"),
+    );
+    // The written file must load back as the tuned parameters.
+    Params::from_toml_str(&text).map_err(|e| format!("internal: tuned config invalid: {e}"))?;
+    match &args.out {
+        Some(path) => std::fs::write(path, &text)
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?,
+        None => print!("{text}"),
+    }
+    eprintln!("dexitac sensor tune: {summary}");
+    if !r.exact {
+        eprintln!(
+            "dexitac sensor tune: no setting finds exactly {} markers; the closest was written \
+             (check the rest frame: nothing touching, in focus, evenly lit)",
+            r.pins
+        );
+    }
+    Ok(r.exact)
+}
+
+/// Runs `dexitac sensor health`.
+pub fn health(args: &HealthArgs) -> ExitCode {
+    match health_inner(args) {
+        Ok(report) => {
+            print_report(&report);
+            ExitCode::from(match report.verdict {
+                Verdict::Pass => 0,
+                Verdict::Warn => 1,
+                Verdict::Fail => 2,
+            })
+        }
+        Err(msg) => {
+            eprintln!("dexitac sensor health: {msg}");
+            ExitCode::from(3)
+        }
+    }
+}
+
+fn health_inner(args: &HealthArgs) -> Result<HealthReport, String> {
+    let params = load_params(args.config.as_deref())?;
+    let rest = load(&args.rest, &params)?;
+    let mut frames = Vec::new();
+    for path in &args.frames {
+        if path.is_dir() {
+            for f in sources::image_files(path).map_err(|e| e.to_string())? {
+                frames.push(load(&f, &params)?);
+            }
+        } else {
+            frames.push(load(path, &params)?);
+        }
+    }
+    let limits_ok = (0.0..=100.0).contains(&args.min_coverage_pct)
+        && args.max_jitter_px.is_finite()
+        && args.max_jitter_px >= 0.0;
+    if !limits_ok {
+        return Err("--min-coverage-pct must lie in 0..=100, --max-jitter-px >= 0".into());
+    }
+    let limits = HealthLimits {
+        min_coverage: args.min_coverage_pct / 100.0,
+        max_jitter_px: args.max_jitter_px,
+        ..HealthLimits::default()
+    };
+    sensor_setup::health(&rest, &frames, &params, &limits, args.pins).map_err(|e| e.to_string())
+}
+
+fn positions(list: &[PointPx]) -> String {
+    const SHOWN: usize = 8;
+    let mut s: Vec<String> = list
+        .iter()
+        .take(SHOWN)
+        .map(|p| format!("({:.0}, {:.0})", p.x, p.y))
+        .collect();
+    if list.len() > SHOWN {
+        s.push(format!("... {} more", list.len() - SHOWN));
+    }
+    if s.is_empty() {
+        String::new()
+    } else {
+        format!("  at {}", s.join(" "))
+    }
+}
+
+fn print_report(r: &HealthReport) {
+    println!(
+        "rest frame: {} markers, pitch {:.1} px; {} frame(s) checked",
+        r.rest_markers, r.pitch_px, r.frames
+    );
+    for (name, list) in [
+        ("missing", &r.missing),
+        ("merged", &r.merged),
+        ("extra", &r.extra),
+        ("damaged", &r.damaged),
+        ("flickering", &r.flickering),
+    ] {
+        println!("{name:>11}: {:4}{}", list.len(), positions(list));
+    }
+    println!(
+        "{:>11}: {:.1} % of the sensing area at or above the contact threshold",
+        "coverage",
+        100.0 * r.coverage
+    );
+    match r.jitter_px {
+        Some((median, max)) => println!("{:>11}: median {median:.3} px, max {max:.3} px", "jitter"),
+        None => println!("{:>11}: n/a (give two or more frames)", "jitter"),
+    }
+    println!("{}", r.verdict);
+    for reason in &r.reasons {
+        println!("  - {reason}");
+    }
+}
+
+/// Runs `dexitac cameras`.
+pub fn cameras() -> ExitCode {
+    #[cfg(target_os = "linux")]
+    {
+        let list = dexitac_rig::camera::v4l2::list_cameras();
+        if list.is_empty() {
+            eprintln!(
+                "dexitac cameras: no capture devices found (no /dev/video* video capture node; \
+                 is the fingertip plugged in, and may you read /dev/video*?)"
+            );
+            return ExitCode::from(1);
+        }
+        for cam in list {
+            println!("{}: {} ({})", cam.path.display(), cam.name, cam.bus);
+            for (format, sizes) in &cam.formats {
+                println!("    {format}: {}", sizes.join(" "));
+            }
+        }
+        ExitCode::SUCCESS
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        eprintln!(
+            "dexitac cameras: {}",
+            dexitac_rig::camera::CameraError::Unsupported
+        );
+        ExitCode::from(1)
+    }
+}

@@ -1,0 +1,206 @@
+//! `dexitac sim`: the whole system on the simulated rig (see
+//! `dexitac_sim::rig`), results to a directory (see `dexitac_sim::output`).
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use dexitac_sim::output;
+use dexitac_sim::plant::FINGER_COUNT;
+use dexitac_sim::rig::{self, SimOptions};
+use dexitac_sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
+use dexitac_tactile::params::Params;
+
+/// Arguments of `dexitac sim`.
+#[derive(Debug, clap::Args)]
+pub struct SimArgs {
+    /// A preset (disturbance, grasp-hold, slip, no-object) or a scenario TOML file.
+    #[arg(long, default_value = DEFAULT_SCENARIO, value_name = "NAME|FILE")]
+    scenario: String,
+    /// Run without tactile feedback (the paper's ablation: open-loop seal).
+    #[arg(long)]
+    no_tactile: bool,
+    /// Directory for events.log, timeseries.csv, plot.png, heatmaps, summary.json.
+    #[arg(long, default_value = "sim-out", value_name = "DIR")]
+    out: PathBuf,
+    /// Simulated time per wall-clock time (0.1..=20).
+    #[arg(long, default_value_t = 1.0, value_parser = parse_speed)]
+    speed: f64,
+    /// Seed of the simulated cameras' noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// The simulated board's host-silence deadline, wall-clock ms (the
+    /// firmware's is 500). Raise it only to run on a machine so busy that
+    /// the host process stalls for longer.
+    #[arg(long, default_value_t = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS,
+          value_parser = clap::value_parser!(u32).range(50..=60_000))]
+    host_silence_ms: u32,
+    /// List the preset scenarios and exit.
+    #[arg(long)]
+    list: bool,
+    #[command(flatten)]
+    record: crate::commands::record::RecordFlags,
+    /// Live view: window and PNG snapshots.
+    #[command(flatten)]
+    live: crate::commands::view::LiveArgs,
+}
+
+fn parse_speed(s: &str) -> Result<f64, String> {
+    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+    if v.is_finite() && (0.1..=20.0).contains(&v) {
+        Ok(v)
+    } else {
+        Err("speed must lie in 0.1..=20".into())
+    }
+}
+
+/// Installs a Ctrl-C handler that sets `stop` (once per process).
+pub fn stop_on_ctrl_c(stop: &Arc<AtomicBool>) {
+    let flag = Arc::clone(stop);
+    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)) {
+        eprintln!("dexitac: Ctrl-C handler not installed ({e}); stop with the scenario's end");
+    }
+}
+
+/// Runs the subcommand.
+pub fn run(args: &SimArgs) -> ExitCode {
+    if args.list {
+        for (name, text) in PRESETS {
+            let description = Scenario::from_toml_str(text, name)
+                .map(|s| s.description)
+                .unwrap_or_default();
+            println!("{name:<12} {description}");
+        }
+        return ExitCode::SUCCESS;
+    }
+    let scenario = match Scenario::load(&args.scenario) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    stop_on_ctrl_c(&stop);
+    eprintln!(
+        "dexitac sim: scenario {} ({:.0} s simulated at {}x), tactile feedback {}",
+        scenario.name,
+        scenario.duration_s,
+        args.speed,
+        if args.no_tactile { "off" } else { "on" }
+    );
+    let rests: Vec<_> = (0..FINGER_COUNT)
+        .map(|finger| rig::rest_frames(finger, &Params::default(), args.seed))
+        .collect();
+    let recorder = match crate::commands::record::start_recorder(
+        &args.record,
+        "sim",
+        &format!(
+            "dexitac sim --scenario {} --seed {}",
+            scenario.name, args.seed
+        ),
+        &rests,
+        None,
+        &Params::default(),
+    ) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let options = SimOptions {
+        event_tap: recorder.as_ref().map(|r| r.sender()),
+        share_frames: args.record.record_frames,
+        tactile_feedback: !args.no_tactile,
+        speed: args.speed,
+        status: true,
+        seed: args.seed,
+        stop,
+        stall_tolerance_ms: args.host_silence_ms,
+        ..SimOptions::default()
+    };
+    // run_sim drops the options: they hold the last sender of the event tap.
+    let report = crate::commands::view::run_sim(&scenario, options, &args.live);
+    let recorded = crate::commands::record::finish_recorder(recorder, &args.record);
+    let (report, view) = match report {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("dexitac sim: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    if let Err(e) = recorded {
+        eprintln!("dexitac sim: {e}");
+        return ExitCode::from(2);
+    }
+    if let Err(e) = output::write_all(&report, &args.out)
+        .and_then(|()| dexitac_view::figures::sim_run::write_all(&report, &args.out))
+    {
+        eprintln!("dexitac sim: writing {}: {e}", args.out.display());
+        return ExitCode::from(2);
+    }
+    println!(
+        "scenario {}: outcome {}, time to stable {}, {} poke(s), wrote {}",
+        report.scenario,
+        report.outcome.name(),
+        report
+            .time_to_stable_s
+            .map_or("-".to_string(), |t| format!("{t:.2} s")),
+        report.disturbances.len(),
+        args.out.display()
+    );
+    if let Some(t) = &report.task {
+        let fmt =
+            |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.1} {unit}"));
+        println!(
+            "  task {} ({}): achieved {} / {} (paper {} / {}), {}{} guard trip(s); simulated with invented plant coefficients",
+            t.kind.name(),
+            t.gripper,
+            fmt(t.achieved_deg, "deg"),
+            fmt(t.achieved_mm, "mm"),
+            fmt(Some(t.kind.paper_deg()), "deg"),
+            fmt(t.kind.paper_mm(), "mm"),
+            if t.stopped_by_guard {
+                "stopped by its guard, "
+            } else if t.completed {
+                "completed, "
+            } else {
+                "not finished, "
+            },
+            t.guard_trips
+        );
+    }
+    for d in &report.disturbances {
+        println!(
+            "  poke {:?} at {:.2} s: detected {}, valves open {}",
+            d.poke.target,
+            d.t_onset_s,
+            d.t_detected_s.map_or("never".to_string(), |t| format!(
+                "+{:.3} s",
+                t - d.t_onset_s
+            )),
+            d.response_s()
+                .map_or("never".to_string(), |t| format!("+{t:.3} s")),
+        );
+    }
+    view.wait();
+    match &report.loop_result {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("dexitac sim: the task loop failed: {e}");
+            let stalled_ms = report.max_loop_gap.as_secs_f64() * 1e3;
+            if stalled_ms >= f64::from(args.host_silence_ms) {
+                eprintln!(
+                    "dexitac sim: the host's control loop stalled for {stalled_ms:.0} ms, longer than \
+                     the board's {} ms host-silence deadline, so the firmware tripped as it would on \
+                     the real rig. The machine was too busy: re-run when it is idle, or give the \
+                     simulated board more time with --host-silence-ms.",
+                    args.host_silence_ms
+                );
+            }
+            ExitCode::from(1)
+        }
+    }
+}

@@ -1,0 +1,149 @@
+//! `dexitac sim` and `dexitac run` on bad input: a clear message and a
+//! non-zero exit, never a panic.
+
+use std::process::{Command, Output};
+
+fn dexitac(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_dexitac"))
+        .args(args)
+        .output()
+        .expect("run dexitac")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn unknown_scenario_is_a_clear_error() {
+    let o = dexitac(&["sim", "--scenario", "no-such-thing"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("not a preset"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}
+
+#[test]
+fn malformed_scenario_file_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.toml");
+    std::fs::write(
+        &path,
+        "name = \"x\"\nduration_s = 5\n[[poke]]\ntarget = \"elbow\"\n",
+    )
+    .unwrap();
+    let o = dexitac(&["sim", "--scenario", path.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("bad.toml"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}
+
+#[test]
+fn out_of_range_speed_is_refused() {
+    let o = dexitac(&["sim", "--speed", "1e9"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("speed"), "{}", stderr(&o));
+    let o = dexitac(&["sim", "--speed", "NaN"]);
+    assert_eq!(o.status.code(), Some(2));
+}
+
+#[test]
+fn run_with_a_bad_config_or_port_is_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("gripper.toml");
+    std::fs::write(&config, "grasp_chambers = [0, 99]\n").unwrap();
+    let o = dexitac(&[
+        "run",
+        "--render",
+        "--port",
+        "/dev/null-nope",
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("grasp_chambers"), "{}", stderr(&o));
+    std::fs::write(&config, "# defaults\n").unwrap();
+    let o = dexitac(&[
+        "run",
+        "--render",
+        "--port",
+        "/dev/null-nope",
+        "--config",
+        config.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("/dev/null-nope"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}
+
+#[test]
+fn list_shows_the_presets() {
+    let o = dexitac(&["sim", "--list"]);
+    assert!(o.status.success());
+    let out = String::from_utf8_lossy(&o.stdout);
+    for name in ["disturbance", "grasp-hold", "slip", "no-object"] {
+        assert!(out.contains(name), "{out}");
+    }
+}
+
+#[test]
+fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
+    use dexitac_protocol::{ArmState, ValveState, CHAMBER_COUNT};
+    use dexitac_sim::mcu::{SimMcu, SimMcuConfig};
+    use dexitac_tactile::synth::{self, Press, Scene, SensorSpec};
+    use dexitac_tactile::PointPx;
+
+    let dir = tempfile::tempdir().unwrap();
+    let sensor = SensorSpec::nominal(640, 480);
+    let mut dirs = Vec::new();
+    for finger in 0..2 {
+        let d = dir.path().join(format!("sensor{finger}"));
+        std::fs::create_dir(&d).unwrap();
+        for i in 0..8u64 {
+            let presses = if i == 0 {
+                vec![] // the rest frame comes first
+            } else {
+                vec![Press {
+                    centre: PointPx::new(320.0, 240.0),
+                    width_px: 25.0,
+                    strength: 0.6,
+                    shear_px: PointPx::new(0.0, 0.0),
+                }]
+            };
+            let f = synth::render(&Scene {
+                sensor: sensor.clone(),
+                presses,
+                dropout: 0.0,
+                seed: i,
+            });
+            let img = image::GrayImage::from_raw(640, 480, f.image.data().to_vec()).unwrap();
+            img.save(d.join(format!("f{i:03}.png"))).unwrap();
+        }
+        dirs.push(d);
+    }
+    let config = dir.path().join("gripper.toml");
+    std::fs::write(&config, "tank_positive_kpa = 30.0\n").unwrap();
+    let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
+    let port = mcu.port_path().to_str().unwrap().to_string();
+    let o = dexitac(&[
+        "run",
+        "--port",
+        &port,
+        "--config",
+        config.to_str().unwrap(),
+        "--frames",
+        dirs[0].to_str().unwrap(),
+        "--frames",
+        dirs[1].to_str().unwrap(),
+        "--fps",
+        "20",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("stopped: Ok(FramesEnded)"),
+        "{}",
+        stderr(&o)
+    );
+    let s = mcu.snapshot();
+    assert_eq!(s.state, ArmState::Disarmed);
+    assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
+}

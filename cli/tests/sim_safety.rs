@@ -1,0 +1,176 @@
+//! Safety of the whole loop against its two external hazards: the host
+//! process dying, and a noisy serial line.
+
+use std::io::Write;
+use std::process::{Command, Stdio};
+use std::sync::{Mutex, MutexGuard};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use dexitac_protocol::{ArmState, Fault, HostMsg, ValveState, CHAMBER_COUNT};
+use dexitac_sim::mcu::{SimMcu, SimMcuConfig};
+use dexitac_sim::rig::{run_scenario, Outcome, SimOptions};
+use dexitac_sim::scenario::Scenario;
+
+/// One test at a time: they share two cores, and the first two run the
+/// board in real time with the firmware's own deadline.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+fn serial() -> MutexGuard<'static, ()> {
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The firmware's host-silence deadline (its default), ms.
+const DEADLINE_MS: u64 = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS as u64;
+
+/// Kills the child on drop, whatever the test does.
+struct Child(std::process::Child);
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        if self.0.kill().is_ok() {
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// Starts `dexitac run --render` on a real-time simulated board with the
+/// firmware's defaults and waits until it armed the board and is closing
+/// the fingers.
+fn host_driving_a_board() -> (SimMcu, Child, tempfile::TempDir) {
+    let mcu = SimMcu::spawn(SimMcuConfig::default()).expect("simulated MCU");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let config = dir.path().join("gripper.toml");
+    std::fs::File::create(&config)
+        .and_then(|mut f| f.write_all(b"# defaults\n"))
+        .expect("config");
+    // The dexitac binary drives the board as on the rig, cameras rendered.
+    let mut child = Child(
+        Command::new(env!("CARGO_BIN_EXE_dexitac"))
+            .args(["run", "--render", "--port"])
+            .arg(mcu.port_path())
+            .arg("--config")
+            .arg(&config)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn dexitac run"),
+    );
+    // Wait until it armed the board and is closing the fingers.
+    let until = Instant::now() + Duration::from_secs(60);
+    loop {
+        let s = mcu.snapshot();
+        if s.state == ArmState::Armed && s.chambers.contains(&ValveState::Inflate) {
+            break;
+        }
+        assert!(
+            Instant::now() < until,
+            "the host never armed the board: {s:?}"
+        );
+        assert!(
+            child.0.try_wait().ok().flatten().is_none(),
+            "dexitac run exited early"
+        );
+        thread::sleep(Duration::from_millis(5));
+    }
+    (mcu, child, dir)
+}
+
+#[test]
+fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
+    let _serial = serial();
+    let (mcu, mut child, _dir) = host_driving_a_board();
+    let killed_at_ms = mcu.snapshot().time_ms;
+    child.0.kill().expect("kill");
+    let _ = child.0.wait();
+    // The board must trip on its own within its deadline.
+    let until = Instant::now() + Duration::from_secs(5);
+    let tripped = loop {
+        let s = mcu.snapshot();
+        if s.state == ArmState::Tripped {
+            break s;
+        }
+        assert!(Instant::now() < until, "never tripped: {s:?}");
+        thread::sleep(Duration::from_millis(1));
+    };
+    assert!(tripped.faults.contains(Fault::HostSilence), "{tripped:?}");
+    // The trip comes at most DEADLINE after the host's last frame, which was
+    // before the kill; slack for reading the snapshot on a busy machine.
+    let after_kill_ms = tripped.time_ms.saturating_sub(killed_at_ms);
+    assert!(
+        after_kill_ms <= DEADLINE_MS + 100,
+        "tripped {after_kill_ms} ms after the kill"
+    );
+    // Safe state: every valve closed, both pumps off.
+    assert_eq!(tripped.chambers, [ValveState::Hold; CHAMBER_COUNT]);
+    assert!(!tripped.pumps.positive_on && !tripped.pumps.negative_on);
+}
+
+#[test]
+fn ctrl_c_leaves_the_gripper_sealed_and_disarmed() {
+    let _serial = serial();
+    let (mcu, mut child, _dir) = host_driving_a_board();
+    // SIGINT, as Ctrl-C sends it.
+    let pid = i32::try_from(child.0.id()).expect("pid");
+    // SAFETY: kill only sends a signal to our own child process.
+    assert_eq!(unsafe { libc::kill(pid, libc::SIGINT) }, 0);
+    let until = Instant::now() + Duration::from_secs(10);
+    let status = loop {
+        if let Some(status) = child.0.try_wait().expect("wait") {
+            break status;
+        }
+        assert!(Instant::now() < until, "dexitac run ignored Ctrl-C");
+        thread::sleep(Duration::from_millis(5));
+    };
+    assert!(status.success(), "{status:?}");
+    let s = mcu.snapshot();
+    // Disarmed by the host (not tripped by its silence), valves sealed, pumps off.
+    assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
+    assert!(s.faults.is_empty(), "{s:?}");
+    assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
+    assert!(!s.pumps.positive_on && !s.pumps.negative_on);
+}
+
+#[test]
+fn line_corruption_never_causes_a_wrong_valve_action() {
+    let _serial = serial();
+    let scenario = Scenario::load("disturbance").expect("preset");
+    let options = SimOptions {
+        speed: if cfg!(debug_assertions) { 1.5 } else { 3.0 },
+        line_error_rate: 1e-3,
+        stall_tolerance_ms: 10_000,
+        ..SimOptions::default()
+    };
+    let r = run_scenario(&scenario, &options).expect("simulated rig");
+    assert!(
+        r.loop_result.is_ok(),
+        "{:?} (longest host loop stall {:?})",
+        r.loop_result,
+        r.max_loop_gap
+    );
+    // The line really was noisy: corrupted frames were dropped on both ends.
+    assert!(r.link_stats.frame_errors > 0, "{:?}", r.link_stats);
+    // Every valve state the MCU drove was one the host had commanded, at
+    // or before that time (times in whole ms of one clock).
+    let hold = [ValveState::Hold; CHAMBER_COUNT];
+    let commanded: Vec<(u64, [ValveState; CHAMBER_COUNT])> = r
+        .commands
+        .iter()
+        .filter_map(|(t, msg, _)| match msg {
+            HostMsg::SetChambers { chambers } => Some((*t, *chambers)),
+            HostMsg::SealAll => Some((*t, hold)),
+            _ => None,
+        })
+        .collect();
+    for (t, chambers) in &r.transitions {
+        let allowed = *chambers == hold
+            || commanded
+                .iter()
+                .any(|(tc, c)| c == chambers && *tc <= *t + 2);
+        assert!(
+            allowed,
+            "valves {chambers:?} at {t} ms were never commanded"
+        );
+    }
+    assert_eq!(r.outcome, Outcome::Held, "{:?}", r.decisions);
+}

@@ -1,0 +1,20 @@
+//! The DexiTac rig on the PC: what connects the pure tactile and gripper
+//! crates to hardware.
+//!
+//! - [`source`]: the [`FrameSource`](source::FrameSource) trait, timed
+//!   frames and the [`Clock`](source::Clock);
+//! - [`event`]: what the task loop reports ([`RuntimeEvent`](event::RuntimeEvent));
+//! - [`link`]: the serial link to the board (framing, acks, heartbeat);
+//! - [`task_loop`]: the paper's processes (one thread per sensor, one link
+//!   thread) with Algorithm 1 in between;
+//! - [`camera`]: V4L2 tactile cameras; [`sources`]: frame folders;
+//! - [`recording`]: MCAP recording, reading and replay.
+#![warn(missing_docs)]
+
+pub mod camera;
+pub mod event;
+pub mod link;
+pub mod recording;
+pub mod source;
+pub mod sources;
+pub mod task_loop;

@@ -1,0 +1,616 @@
+//! The host's task loop (paper Fig. 4, Algorithm 1 processes 1-3): one
+//! thread per tactile sensor (frame source -> pipeline -> observation), one
+//! link thread (grasp state machine, commands and acks, heartbeat,
+//! telemetry), channels between them.
+//!
+//! ```text
+//! sensor 0: FrameSource -> Pipeline -> Observation --\
+//!                                                      mpsc -> link thread: Grasp -> Link -> MCU
+//! sensor 1: FrameSource -> Pipeline -> Observation --/              |
+//!                                                        RuntimeEvent (log, recorder, status line)
+//! ```
+//!
+//! # Commands (two-finger grasp)
+//!
+//! The *grasping chambers* ([`ControlConfig::grasp_chambers`], default
+//! [`DEFAULT_GRASP_CHAMBERS`]) are the chambers whose inflation closes the
+//! fingers: for each finger its Rot joint (chambers 0 and 4) and the Dex
+//! bellows on the palm side (chambers 1 and 5). The other Dex bellows (2, 3,
+//! 6, 7) bend the finger sideways or extend it, which a two-finger grasp does
+//! not use; they stay sealed.
+//!
+//! | event | command |
+//! | --- | --- |
+//! | start | `Disarm` (clears a latched trip), `Arm`, tank targets, both pumps `Regulate`, telemetry on |
+//! | tanks charged | `SetChambers`: grasping chambers `Inflate`, others `Hold` (fingers close) |
+//! | [`Command::Seal`] (stable) | `SealAll` |
+//! | [`Command::ReopenInflation`] (disturbance) | `SetChambers`: grasping chambers `Inflate` |
+//! | [`Command::Release`] (slip, no contact, contact lost) | `SetChambers`: grasping chambers `Deflate` (fingers open) |
+//! | stop (end, Ctrl-C, any error) | `SealAll`, then `Disarm` |
+//!
+//! With tactile feedback off ([`ControlConfig::tactile_feedback`], the
+//! paper's ablation) the frames are still processed and reported, but the
+//! grasp runs open loop: inflate for [`ControlConfig::open_loop_close_ms`]
+//! (default: the paper's ClosureGrip time to stable, Table III), then seal,
+//! and nothing after that.
+//!
+//! # Manipulation
+//!
+//! With a [`ControlConfig::task`] (and tactile feedback on), the first
+//! [`Command::Seal`] starts the [`dexitac_gripper::manipulation::Primitive`]. From then
+//! on the primitive owns the grasp: it gets every observation and clock tick,
+//! the grasp state machine none (the manipulated object moves the contact
+//! centres by design; the primitive's tactile guards take its place). Each
+//! of its events is reported ([`RuntimeEvent::Task`]) and sent as
+//! `SetChambers`: grasping chambers `Hold` (sealed), the manipulation
+//! chambers ([`dexitac_gripper::manipulation::MANIPULATION_CHAMBERS`]) per the drive.
+//!
+//! # Stopping
+//!
+//! The loop ends when the stop flag is set (Ctrl-C, end of a scenario), when
+//! every frame source has ended, or on an error (link failure, MCU fault or
+//! reset, a sensor thread failing). In every case it then seals the valves
+//! and disarms the MCU (pumps off, valves sealed); if the link itself is
+//! dead the firmware reaches the same safe state on its host-silence trip.
+//!
+//! # Clock
+//!
+//! Every time in the loop comes from an injected [`Clock`]: the wall clock
+//! on the rig, a clock running `speed` times faster in the simulator and
+//! tests. Only the link's own ack and heartbeat timeouts are wall-clock
+//! durations (scale them with [`LinkConfig::scaled`](crate::link::LinkConfig)).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
+use std::time::{Duration, Instant};
+
+use dexitac_protocol::{
+    Chambers, FaultEvent, HostMsg, NackReason, PumpMode, TankTargets, ValveState, CHAMBER_COUNT,
+};
+
+use crate::event::{RuntimeEvent, SensorReport, StopReason};
+use crate::link::{Link, LinkError, McuEvent, Port};
+use crate::source::{Clock, FrameSource, HaltHandle};
+use dexitac_gripper::grasp::{Command, Decision, Grasp, GraspParams, Observation, SENSOR_COUNT};
+use dexitac_gripper::manipulation::{Primitive, TaskEvent, TaskParams};
+use dexitac_tactile::pipeline::Pipeline;
+
+/// Default grasping chambers: each finger's Rot joint and palm-side Dex bellows.
+pub const DEFAULT_GRASP_CHAMBERS: [usize; 4] = [0, 1, 4, 5];
+/// Open-loop closing time without tactile feedback, ms: the paper's average
+/// time to a stable ClosureGrip (Table III: 3.38 s and 3.40 s).
+pub const OPEN_LOOP_CLOSE_MS: u64 = 3_400;
+
+/// One tactile sensor: its frames and its calibrated pipeline.
+pub struct Sensor {
+    /// The frame source.
+    pub source: Box<dyn FrameSource>,
+    /// The calibrated pipeline.
+    pub pipeline: Pipeline,
+}
+
+/// Settings of the task loop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ControlConfig {
+    /// Algorithm 1 thresholds.
+    pub grasp: GraspParams,
+    /// Chambers whose inflation closes the fingers.
+    pub grasp_chambers: Vec<usize>,
+    /// Tank targets (positive, negative), Pa.
+    pub tank_targets_pa: (i32, i32),
+    /// Start closing when the positive tank reaches this fraction of its target.
+    pub charge_fraction: f64,
+    /// Start closing at the latest this long after arming, ms.
+    pub charge_timeout_ms: u64,
+    /// Telemetry period asked of the MCU, ms.
+    pub telemetry_interval_ms: u16,
+    /// Close the loop on the tactile observations (false: the paper's ablation).
+    pub tactile_feedback: bool,
+    /// Without tactile feedback: seal this long after closing began, ms.
+    pub open_loop_close_ms: u64,
+    /// A manipulation primitive to run once the grasp is stable and sealed
+    /// (see [Manipulation](self#manipulation)).
+    pub task: Option<TaskParams>,
+    /// Send each working frame with its [`RuntimeEvent::Observation`]
+    /// (for recording and the live view; costs one move per frame).
+    pub share_frames: bool,
+}
+
+impl Default for ControlConfig {
+    fn default() -> Self {
+        ControlConfig {
+            grasp: GraspParams::default(),
+            grasp_chambers: DEFAULT_GRASP_CHAMBERS.to_vec(),
+            tank_targets_pa: dexitac_firmware::control::DEFAULT_TARGETS_PA,
+            charge_fraction: 0.9,
+            charge_timeout_ms: 8_000,
+            telemetry_interval_ms: 20,
+            tactile_feedback: true,
+            open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
+            task: None,
+            share_frames: false,
+        }
+    }
+}
+
+/// Why the task loop failed.
+#[derive(Debug, thiserror::Error)]
+pub enum RuntimeError {
+    /// The serial link failed.
+    #[error("link: {0}")]
+    Link(#[from] LinkError),
+    /// The MCU tripped its safety loop.
+    #[error("the MCU tripped: {:?} at {} ms (tanks {} / {} Pa)", .0.fault, .0.time_ms, .0.positive_tank_pa, .0.negative_tank_pa)]
+    McuFault(FaultEvent),
+    /// The MCU restarted during the run (it is disarmed, in its safe state).
+    #[error("the MCU reset during the run")]
+    McuReset,
+    /// A sensor thread failed.
+    #[error("sensor {sensor}: {reason}")]
+    Sensor {
+        /// The sensor.
+        sensor: usize,
+        /// What failed.
+        reason: String,
+    },
+    /// The configuration is not usable.
+    #[error("configuration: {0}")]
+    Config(String),
+}
+
+/// A sensor thread's message to the link thread.
+enum SensorMsg {
+    Report {
+        arrived: Instant,
+        report: SensorReport,
+    },
+    Failed {
+        sensor: usize,
+        reason: String,
+    },
+    Ended,
+}
+
+/// Niceness of the sensor threads: image processing yields the CPU to the
+/// link thread, whose heartbeat and commands have deadlines (the firmware's
+/// host-silence trip), whatever else runs on the machine.
+const SENSOR_THREAD_NICE: i32 = 10;
+
+/// Lowers the calling thread's scheduling priority (Linux: per thread).
+/// Best effort: on failure the thread runs at the default priority.
+pub fn lower_thread_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: setpriority only reads its integer arguments; `who = 0` is
+    // the calling thread on Linux.
+    unsafe {
+        libc::setpriority(libc::PRIO_PROCESS, 0, SENSOR_THREAD_NICE);
+    }
+}
+
+fn sensor_thread(
+    sensor: usize,
+    mut setup: Sensor,
+    share_frames: bool,
+    clock: Clock,
+    stop: &AtomicBool,
+    tx: &Sender<SensorMsg>,
+) {
+    lower_thread_priority();
+    while !stop.load(Ordering::Relaxed) {
+        let frame = match setup.source.next_frame(&clock) {
+            Ok(Some(frame)) => frame,
+            Ok(None) => break,
+            Err(e) => {
+                // The receiver only disappears when the loop has ended.
+                let _ = tx.send(SensorMsg::Failed {
+                    sensor,
+                    reason: e.to_string(),
+                });
+                return;
+            }
+        };
+        let arrived = Instant::now();
+        let msg = match setup.pipeline.run(&frame.frame) {
+            Ok(result) => SensorMsg::Report {
+                arrived,
+                report: SensorReport::new(
+                    sensor,
+                    frame.t_ms,
+                    &setup.pipeline,
+                    &result,
+                    share_frames.then_some(frame.frame),
+                ),
+            },
+            Err(e) => SensorMsg::Failed {
+                sensor,
+                reason: e.to_string(),
+            },
+        };
+        let failed = matches!(msg, SensorMsg::Failed { .. });
+        if tx.send(msg).is_err() || failed {
+            return;
+        }
+    }
+    let _ = tx.send(SensorMsg::Ended);
+}
+
+/// Where the loop is.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Stage {
+    Charging { since_ms: u64 },
+    Closing { since_ms: u64 },
+    Sealed,
+}
+
+struct Control<'a, P> {
+    config: &'a ControlConfig,
+    link: &'a mut Link<P>,
+    clock: Clock,
+    events: &'a Sender<RuntimeEvent>,
+    grasp: Grasp,
+    stage: Stage,
+    positive_tank_pa: Option<i32>,
+    max_loop_gap: Duration,
+    task: Option<Primitive>,
+}
+
+impl<P: Port> Control<'_, P> {
+    fn chambers(&self, state: ValveState) -> Chambers {
+        let mut c = [ValveState::Hold; CHAMBER_COUNT];
+        for &i in &self.config.grasp_chambers {
+            if let Some(slot) = c.get_mut(i) {
+                *slot = state;
+            }
+        }
+        c
+    }
+
+    fn send(
+        &mut self,
+        msg: HostMsg,
+        reason: &'static str,
+        arrived: Option<Instant>,
+    ) -> Result<(), RuntimeError> {
+        if let Err(e) = self.link.command(msg) {
+            return Err(self.explain(e));
+        }
+        let written = self.link.last_command_written();
+        let from_frame = arrived
+            .zip(written)
+            .map(|(a, w)| w.saturating_duration_since(a));
+        let _ = self.events.send(RuntimeEvent::CommandSent {
+            t_ms: self.written_ms(written),
+            msg,
+            reason,
+            from_frame,
+        });
+        Ok(())
+    }
+
+    /// A refusal because the MCU tripped is reported as the trip itself
+    /// (its fault event is usually still queued on the link).
+    fn explain(&mut self, e: LinkError) -> RuntimeError {
+        if matches!(
+            e,
+            LinkError::Nack {
+                reason: NackReason::Tripped,
+                ..
+            }
+        ) {
+            if let Ok(events) = self.link.poll(Duration::from_millis(5)) {
+                for event in events {
+                    if let McuEvent::Fault(f) = event {
+                        return RuntimeError::McuFault(f);
+                    }
+                }
+            }
+        }
+        e.into()
+    }
+
+    /// Clock time of a wall-clock instant in the recent past.
+    fn written_ms(&self, at: Option<Instant>) -> u64 {
+        let now = self.clock.now_ms();
+        let ago = at.map_or(0.0, |a| {
+            a.elapsed().as_secs_f64() * 1e3 * self.clock.speed()
+        });
+        now.saturating_sub(ago as u64)
+    }
+
+    fn setup(&mut self) -> Result<(), RuntimeError> {
+        self.link.hello()?;
+        self.link.command(HostMsg::Disarm)?;
+        self.link.command(HostMsg::Arm)?;
+        let (pos, neg) = self.config.tank_targets_pa;
+        let targets =
+            TankTargets::new(pos, neg).map_err(|e| RuntimeError::Config(e.to_string()))?;
+        self.send(HostMsg::SetTankTargets(targets), "setup", None)?;
+        self.send(
+            HostMsg::SetPumps {
+                positive: PumpMode::Regulate,
+                negative: PumpMode::Regulate,
+            },
+            "setup",
+            None,
+        )?;
+        self.link.command(HostMsg::SetTelemetryInterval {
+            interval_ms: self.config.telemetry_interval_ms,
+        })?;
+        self.stage = Stage::Charging {
+            since_ms: self.clock.now_ms(),
+        };
+        Ok(())
+    }
+
+    fn start_closing(&mut self) -> Result<(), RuntimeError> {
+        let now = self.clock.now_ms();
+        self.send(
+            HostMsg::SetChambers {
+                chambers: self.chambers(ValveState::Inflate),
+            },
+            "close fingers",
+            None,
+        )?;
+        self.grasp.start(now);
+        self.stage = Stage::Closing { since_ms: now };
+        Ok(())
+    }
+
+    /// Time-driven steps: charging done, open-loop seal, no-contact timeout.
+    fn on_time(&mut self) -> Result<(), RuntimeError> {
+        let now = self.clock.now_ms();
+        match self.stage {
+            Stage::Charging { since_ms } => {
+                let target = f64::from(self.config.tank_targets_pa.0);
+                let charged = self
+                    .positive_tank_pa
+                    .is_some_and(|p| f64::from(p) >= self.config.charge_fraction * target);
+                if charged || now.saturating_sub(since_ms) >= self.config.charge_timeout_ms {
+                    self.start_closing()?;
+                }
+            }
+            Stage::Closing { since_ms }
+                if !self.config.tactile_feedback
+                    && now.saturating_sub(since_ms) >= self.config.open_loop_close_ms =>
+            {
+                self.send(HostMsg::SealAll, "open-loop seal", None)?;
+                self.stage = Stage::Sealed;
+            }
+            _ => {}
+        }
+        if self.task_started() {
+            if let Some(e) = self.task.as_mut().and_then(|p| p.tick(now)) {
+                self.on_task(e, None)?;
+            }
+        } else if self.config.tactile_feedback {
+            if let Some(d) = self.grasp.tick(now) {
+                self.act(d, None)?;
+            }
+        }
+        Ok(())
+    }
+
+    fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+        let _ = self.events.send(RuntimeEvent::Decision {
+            t_ms: self.clock.now_ms(),
+            decision,
+        });
+        let (msg, reason) = match decision.command {
+            Command::Seal => (HostMsg::SealAll, "stable: seal"),
+            Command::ReopenInflation => (
+                HostMsg::SetChambers {
+                    chambers: self.chambers(ValveState::Inflate),
+                },
+                "disturbance: reopen inflation",
+            ),
+            Command::Release => (
+                HostMsg::SetChambers {
+                    chambers: self.chambers(ValveState::Deflate),
+                },
+                "release",
+            ),
+        };
+        self.stage = Stage::Sealed;
+        self.send(msg, reason, arrived)?;
+        if decision.command == Command::Seal {
+            let now = self.clock.now_ms();
+            if let Some(e) = self.task.as_mut().and_then(|p| p.start(now)) {
+                self.on_task(e, arrived)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// A manipulation primitive has started (it then owns the grasp).
+    fn task_started(&self) -> bool {
+        self.task.as_ref().is_some_and(|p| p.running() || p.done())
+    }
+
+    /// Reports a primitive's event and commands its drive: the grasping
+    /// chambers stay sealed, the manipulation chambers follow the drive.
+    fn on_task(&mut self, event: TaskEvent, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+        let _ = self.events.send(RuntimeEvent::Task {
+            t_ms: self.clock.now_ms(),
+            event,
+        });
+        let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
+        for (i, state) in event.drive().valves() {
+            if let Some(slot) = chambers.get_mut(i) {
+                *slot = state;
+            }
+        }
+        let reason = match event {
+            TaskEvent::Stroke { .. } => "task: stroke",
+            TaskEvent::Guard { stopped: true, .. } => "task: guard stop",
+            TaskEvent::Guard { stopped: false, .. } => "task: guard return",
+            TaskEvent::Completed => "task: completed",
+        };
+        self.send(HostMsg::SetChambers { chambers }, reason, arrived)
+    }
+
+    fn on_sensor(&mut self, msg: SensorMsg) -> Result<bool, RuntimeError> {
+        match msg {
+            SensorMsg::Report { arrived, report } => {
+                let (sensor, t_ms, centre_mm) = (report.sensor, report.t_ms, report.centre_mm);
+                let _ = self.events.send(RuntimeEvent::Observation(report));
+                let started = self.task_started();
+                if let Some(e) = self
+                    .task
+                    .as_mut()
+                    .and_then(|p| p.observe(sensor, t_ms, centre_mm))
+                {
+                    self.on_task(e, Some(arrived))?;
+                }
+                if !started
+                    && self.config.tactile_feedback
+                    && !matches!(self.stage, Stage::Charging { .. })
+                {
+                    let obs = Observation { t_ms, centre_mm };
+                    if let Some(d) = self.grasp.observe(sensor, obs) {
+                        self.act(d, Some(arrived))?;
+                    }
+                }
+                Ok(true)
+            }
+            SensorMsg::Failed { sensor, reason } => Err(RuntimeError::Sensor { sensor, reason }),
+            SensorMsg::Ended => Ok(false),
+        }
+    }
+
+    fn on_mcu(&mut self) -> Result<(), RuntimeError> {
+        self.link.keep_alive()?;
+        for event in self.link.poll(Duration::ZERO)? {
+            match event {
+                McuEvent::Telemetry(telemetry) => {
+                    self.positive_tank_pa = Some(telemetry.positive_tank_pa);
+                    let _ = self.events.send(RuntimeEvent::Telemetry {
+                        t_ms: self.clock.now_ms(),
+                        telemetry,
+                    });
+                }
+                McuEvent::Fault(fault) => return Err(RuntimeError::McuFault(fault)),
+                McuEvent::McuReset => return Err(RuntimeError::McuReset),
+            }
+        }
+        Ok(())
+    }
+
+    fn run(
+        &mut self,
+        rx: &Receiver<SensorMsg>,
+        stop: &AtomicBool,
+    ) -> Result<StopReason, RuntimeError> {
+        self.setup()?;
+        let mut live = SENSOR_COUNT;
+        // Wake often enough to keep the heartbeat well inside its period.
+        let wait = Duration::from_millis((self.link.config().heartbeat_ms / 4).clamp(1, 10));
+        let mut last_pass = Instant::now();
+        loop {
+            self.max_loop_gap = self.max_loop_gap.max(last_pass.elapsed());
+            last_pass = Instant::now();
+            if stop.load(Ordering::Relaxed) {
+                return Ok(StopReason::Requested);
+            }
+            match rx.recv_timeout(wait) {
+                Ok(msg) => {
+                    if !self.on_sensor(msg)? {
+                        live = live.saturating_sub(1);
+                        if live == 0 {
+                            return Ok(StopReason::FramesEnded);
+                        }
+                    }
+                    // Drain what queued up while this frame was handled.
+                    while let Ok(msg) = rx.try_recv() {
+                        if !self.on_sensor(msg)? {
+                            live = live.saturating_sub(1);
+                        }
+                    }
+                    if live == 0 {
+                        return Ok(StopReason::FramesEnded);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return Ok(StopReason::FramesEnded),
+            }
+            self.on_time()?;
+            self.on_mcu()?;
+        }
+    }
+
+    /// Seal, then disarm; the first error is returned, both are tried.
+    fn shutdown(&mut self) -> Result<(), LinkError> {
+        let sealed = self.link.command(HostMsg::SealAll);
+        let disarmed = self.link.command(HostMsg::Disarm);
+        sealed.and(disarmed)
+    }
+}
+
+/// Runs the task loop until `stop` is set, the frames end, or an error.
+/// Always ends with the gripper sealed and the MCU disarmed (see the
+/// [module docs](self)). `sensors` must hold one entry per fingertip.
+pub fn run<P: Port>(
+    config: &ControlConfig,
+    link: &mut Link<P>,
+    sensors: Vec<Sensor>,
+    clock: Clock,
+    stop: &AtomicBool,
+    events: &Sender<RuntimeEvent>,
+) -> Result<StopReason, RuntimeError> {
+    if sensors.len() != SENSOR_COUNT {
+        return Err(RuntimeError::Config(format!(
+            "{} sensors given, the gripper has {SENSOR_COUNT}",
+            sensors.len()
+        )));
+    }
+    let sensor_stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel();
+    let mut control = Control {
+        config,
+        link,
+        clock,
+        events,
+        grasp: Grasp::new(config.grasp),
+        stage: Stage::Charging { since_ms: 0 },
+        positive_tank_pa: None,
+        max_loop_gap: Duration::ZERO,
+        task: config
+            .task
+            .clone()
+            .filter(|_| config.tactile_feedback)
+            .map(Primitive::new),
+    };
+    let halts: Vec<HaltHandle> = sensors
+        .iter()
+        .filter_map(|s| s.source.halt_handle())
+        .collect();
+    // The gripper is sealed and disarmed as soon as the loop ends, before
+    // waiting for the sensor threads (a camera may be blocked on a lost
+    // device until its halt handle is called).
+    let (result, shutdown) = std::thread::scope(|scope| {
+        for (i, sensor) in sensors.into_iter().enumerate() {
+            let tx = tx.clone();
+            let sensor_stop = &sensor_stop;
+            let share = config.share_frames;
+            scope.spawn(move || sensor_thread(i, sensor, share, clock, sensor_stop, &tx));
+        }
+        drop(tx);
+        let result = control.run(&rx, stop);
+        let shutdown = control.shutdown();
+        sensor_stop.store(true, Ordering::Relaxed);
+        for halt in &halts {
+            halt();
+        }
+        (result, shutdown)
+    });
+    let result = match (result, shutdown) {
+        (Err(e), _) => Err(e),
+        (Ok(_), Err(e)) => Err(e.into()),
+        (Ok(reason), Ok(())) => Ok(reason),
+    };
+    let _ = events.send(RuntimeEvent::Stopped {
+        t_ms: clock.now_ms(),
+        max_loop_gap: control.max_loop_gap,
+        outcome: result.as_ref().map(|r| *r).map_err(|e| e.to_string()),
+    });
+    result
+}

@@ -1,0 +1,753 @@
+//! The whole simulated rig around the host's real task loop: a scenario in,
+//! a [`SimReport`] out.
+//!
+//! [`run_scenario`] starts the simulated MCU with the plant
+//! ([`crate::mcu::SimMcu::spawn_with_plant`]), opens its pty with the
+//! normal [`dexitac_rig::link::Link`], gives each fingertip a rendered frame source
+//! ([`crate::render`]) and a pipeline calibrated on its rest frame, and
+//! runs [`dexitac_rig::task_loop::run`] on a clock `speed` times faster than the wall
+//! clock. A monitor thread ends the run at the scenario's duration, shortly
+//! after the object fell or was released, or when the caller's stop flag is
+//! set (Ctrl-C).
+//!
+//! Above real time (`speed > 1`) the firmware's host-silence deadline is
+//! scaled by the speed: the host keeps the 500 ms of *wall-clock* time it
+//! has on the rig ([`SimOptions::stall_tolerance_ms`]), so the scheduling
+//! jitter of a busy PC does not trip the simulated board any more than it
+//! would trip the real one. At `speed = 1` the firmware's default applies.
+//!
+//! # Outcome
+//!
+//! - `held`: the object was still in the grasp at the end;
+//! - `dropped`: it fell out while the host had not released it;
+//! - `released`: the host released (slip, lost contact, no contact);
+//! - `not_grasped`: no object and no release (only without tactile feedback).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use dexitac_protocol::{HostMsg, ValveState};
+
+use crate::line::NoisyPort;
+use crate::mcu::{lock_plant, McuSnapshot, SharedPlant, SimMcu, SimMcuConfig};
+use crate::plant::{ObjectState, Plant, Poke, WorldState, FINGER_COUNT};
+use crate::render::Renderer;
+use crate::scenario::Scenario;
+use crate::task_report::{task_report, TaskReport};
+use dexitac_gripper::grasp::{Cause, CentreMm, Command};
+use dexitac_rig::event::{RuntimeEvent, StopReason};
+use dexitac_rig::link::{Link, LinkConfig, LinkError, LinkStats, Port};
+use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
+use dexitac_rig::task_loop::{ControlConfig, Sensor};
+use dexitac_tactile::calibrate::{self, Calibration, CalibrationError};
+use dexitac_tactile::params::Params;
+use dexitac_tactile::pipeline::Pipeline;
+use dexitac_tactile::synth::SensorSpec;
+use dexitac_tactile::PointPx;
+
+/// Working frame size of the simulated cameras (the paper's 640x480).
+const FRAME_SIZE_PX: (usize, usize) = (640, 480);
+/// How far the simulated MCU's tick stamps may trail the shared clock, ms.
+const MCU_LAG_MS: u64 = 50;
+/// The plant's trace period, ms of simulated time.
+const TRACE_PERIOD_MS: u64 = 10;
+/// Keep running this long after the object fell or was released, ms.
+const AFTER_END_MS: u64 = 1_500;
+/// The simulated tube and valves are slower than the firmware's QEMU tank
+/// model assumes; the plant models the actuator side itself.
+const STATUS_PERIOD: Duration = Duration::from_millis(200);
+
+/// How to run a scenario.
+#[derive(Debug, Clone)]
+pub struct SimOptions {
+    /// Close the loop on the tactile frames (false: the paper's ablation).
+    pub tactile_feedback: bool,
+    /// Simulated time per wall-clock time.
+    pub speed: f64,
+    /// Print a one-line status on stderr while running.
+    pub status: bool,
+    /// Seed of the cameras' noise.
+    pub seed: u64,
+    /// Set to end the run early (Ctrl-C).
+    pub stop: Arc<AtomicBool>,
+    /// Probability that a byte on the serial line is corrupted, each way.
+    pub line_error_rate: f64,
+    /// Wall-clock time the host may stall before the simulated board trips
+    /// on host silence (and the link's ack timeout, a quarter of it), ms.
+    /// The rig's value is the firmware's 500 ms; tests on a loaded machine
+    /// with unoptimised builds give the loop more, as the grasp logic, not
+    /// the scheduler, is what they check (the silence trip has its own test).
+    pub stall_tolerance_ms: u32,
+    /// Every event of the task loop is also sent here (recorder, live
+    /// view); a closed receiver is ignored.
+    pub event_tap: Option<mpsc::Sender<RuntimeEvent>>,
+    /// Attach the working frames to the observations (for the tap).
+    pub share_frames: bool,
+}
+
+impl Default for SimOptions {
+    fn default() -> Self {
+        SimOptions {
+            tactile_feedback: true,
+            speed: 1.0,
+            status: false,
+            seed: 1,
+            stop: Arc::new(AtomicBool::new(false)),
+            line_error_rate: 0.0,
+            stall_tolerance_ms: dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS,
+            event_tap: None,
+            share_frames: false,
+        }
+    }
+}
+
+/// Why the simulated rig could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    /// The simulated MCU (pty) could not start.
+    #[error("simulated MCU: {0}")]
+    Mcu(#[from] std::io::Error),
+    /// Its port could not be opened.
+    #[error("link: {0}")]
+    Link(#[from] LinkError),
+    /// A simulated sensor could not be calibrated.
+    #[error("calibration of sensor {sensor}: {source}")]
+    Calibration {
+        /// The sensor.
+        sensor: usize,
+        /// Why.
+        source: CalibrationError,
+    },
+}
+
+/// How the scenario ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    /// The object was still held at the end.
+    Held,
+    /// The object fell while the host had not released it.
+    Dropped,
+    /// The host released.
+    Released,
+    /// No object and no release.
+    NotGrasped,
+}
+
+impl Outcome {
+    /// The name used in `summary.json`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Outcome::Held => "held",
+            Outcome::Dropped => "dropped",
+            Outcome::Released => "released",
+            Outcome::NotGrasped => "not_grasped",
+        }
+    }
+}
+
+/// The timeline of one poke, s of simulated time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DisturbanceTiming {
+    /// The poke.
+    pub poke: Poke,
+    /// Onset of the force.
+    pub t_onset_s: f64,
+    /// The host decided "disturbance".
+    pub t_detected_s: Option<f64>,
+    /// The reopen command's bytes were written.
+    pub t_reopen_sent_s: Option<f64>,
+    /// The MCU opened the grasping inlets.
+    pub t_valves_open_s: Option<f64>,
+}
+
+impl DisturbanceTiming {
+    /// Onset to valves open, s.
+    pub fn response_s(&self) -> Option<f64> {
+        self.t_valves_open_s.map(|t| t - self.t_onset_s)
+    }
+}
+
+/// A density snapshot taken at an event.
+#[derive(Debug, Clone)]
+pub struct Snapshot {
+    /// When, ms.
+    pub t_ms: u64,
+    /// What happened.
+    pub label: String,
+    /// Each sensor's latest markers, working px.
+    pub markers: [Arc<Vec<PointPx>>; FINGER_COUNT],
+}
+
+/// One sensor observation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObservationRecord {
+    /// The sensor.
+    pub sensor: usize,
+    /// Capture time, ms.
+    pub t_ms: u64,
+    /// The measured contact centre.
+    pub centre_mm: Option<CentreMm>,
+    /// Pipeline time, ms.
+    pub pipeline_ms: f64,
+}
+
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct SimReport {
+    /// The scenario's name.
+    pub scenario: String,
+    /// Whether the loop was closed on the tactile frames.
+    pub tactile_feedback: bool,
+    /// How it ended.
+    pub outcome: Outcome,
+    /// Closing began -> seal decision, s.
+    pub time_to_stable_s: Option<f64>,
+    /// Per poke.
+    pub disturbances: Vec<DisturbanceTiming>,
+    /// Decisions of the grasp state machine: (handled at ms, decision).
+    pub decisions: Vec<(u64, dexitac_gripper::grasp::Decision)>,
+    /// Commands sent: (bytes written at ms, command, reason).
+    pub commands: Vec<(u64, HostMsg, &'static str)>,
+    /// Frame arrival -> command bytes written, for commands a frame decided.
+    pub frame_to_command: Vec<Duration>,
+    /// Every observation.
+    pub observations: Vec<ObservationRecord>,
+    /// The plant's trace.
+    pub trace: Vec<WorldState>,
+    /// Valve output changes: (ms, chambers).
+    pub transitions: Vec<(u64, dexitac_protocol::Chambers)>,
+    /// When the object fell, ms.
+    pub dropped_at_ms: Option<u64>,
+    /// Density snapshots at decisions.
+    pub snapshots: Vec<Snapshot>,
+    /// The calibrations (for heatmaps).
+    pub calibrations: Vec<Calibration>,
+    /// How the task loop ended.
+    pub loop_result: Result<StopReason, String>,
+    /// The MCU's state at the end.
+    pub mcu_at_end: McuSnapshot,
+    /// The host link's traffic counters.
+    pub link_stats: LinkStats,
+    /// The longest wall-clock stall of the host's link thread.
+    pub max_loop_gap: Duration,
+    /// The grasping chambers.
+    pub grasp_chambers: Vec<usize>,
+    /// The manipulation task's outcome, if the scenario has one and it started.
+    pub task: Option<TaskReport>,
+    /// Simulated run time, s.
+    pub sim_s: f64,
+    /// Wall-clock run time, s.
+    pub wall_s: f64,
+}
+
+/// A fingertip camera rendering the plant's contact.
+struct RenderSource {
+    renderer: Renderer,
+    plant: SharedPlant,
+    finger: usize,
+    period_ms: u64,
+    next_ms: u64,
+}
+
+impl FrameSource for RenderSource {
+    fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
+        clock.sleep_until(self.next_ms);
+        let t_ms = clock.now_ms();
+        let contact = lock_plant(&self.plant)
+            .state()
+            .contacts
+            .get(self.finger)
+            .copied()
+            .flatten();
+        let frame = self.renderer.render(contact.as_ref());
+        self.next_ms += self.period_ms;
+        if self.next_ms <= t_ms {
+            // Rendering fell behind: drop frames rather than queue them.
+            self.next_ms = t_ms + self.period_ms;
+        }
+        Ok(Some(TimedFrame { t_ms, frame }))
+    }
+}
+
+fn sensor_spec(finger: usize) -> SensorSpec {
+    let mut spec = SensorSpec::nominal(FRAME_SIZE_PX.0, FRAME_SIZE_PX.1);
+    // Two skins are never cut alike.
+    spec.lattice_offset = PointPx::new(4.0 * finger as f64, 3.0 * finger as f64);
+    spec
+}
+
+/// Rest frames a simulated fingertip is calibrated on.
+const REST_FRAMES: usize = 2;
+
+fn renderer(finger: usize, params: &Params, seed: u64) -> Renderer {
+    Renderer::new(
+        sensor_spec(finger),
+        params.frame.mm_per_px,
+        seed.wrapping_mul(31).wrapping_add(finger as u64),
+    )
+}
+
+/// The rest frames simulated fingertip `finger` is calibrated on in a run
+/// with camera seed `seed` (the same frames every time: for recordings,
+/// whose replay recalibrates on them).
+pub fn rest_frames(
+    finger: usize,
+    params: &Params,
+    seed: u64,
+) -> Vec<dexitac_tactile::frame::GreyFrame> {
+    renderer_after_rest(finger, params, seed).1
+}
+
+/// Fingertip `finger`'s camera, after it rendered the rest frames (also
+/// returned) that its pipeline is calibrated on.
+fn renderer_after_rest(
+    finger: usize,
+    params: &Params,
+    seed: u64,
+) -> (Renderer, Vec<dexitac_tactile::frame::GreyFrame>) {
+    let mut renderer = renderer(finger, params, seed);
+    let rest = (0..REST_FRAMES).map(|_| renderer.render(None)).collect();
+    (renderer, rest)
+}
+
+fn make_sensor(
+    finger: usize,
+    params: &Params,
+    plant: &SharedPlant,
+    period_ms: u64,
+    seed: u64,
+) -> Result<(Sensor, Calibration), SimError> {
+    let (renderer, rest) = renderer_after_rest(finger, params, seed);
+    let calibration =
+        calibrate::calibrate(&rest, params).map_err(|source| SimError::Calibration {
+            sensor: finger,
+            source,
+        })?;
+    let pipeline = Pipeline::new(calibration.clone(), params.clone());
+    let source = RenderSource {
+        renderer,
+        plant: Arc::clone(plant),
+        finger,
+        period_ms,
+        next_ms: 0,
+    };
+    Ok((
+        Sensor {
+            source: Box::new(source),
+            pipeline,
+        },
+        calibration,
+    ))
+}
+
+/// What the monitor and the collector share.
+#[derive(Default)]
+struct Live {
+    released_ms: Option<u64>,
+    phase: String,
+    centres: [Option<CentreMm>; FINGER_COUNT],
+    markers: [Arc<Vec<PointPx>>; FINGER_COUNT],
+}
+
+/// Runs `scenario` on the simulated rig.
+pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimReport, SimError> {
+    let wall_start = Instant::now();
+    let control = ControlConfig {
+        tactile_feedback: options.tactile_feedback,
+        task: scenario.task.clone(),
+        share_frames: options.share_frames,
+        ..ControlConfig::default()
+    };
+    let params = Params::default();
+    let plant = Plant::new(
+        scenario.plant.clone(),
+        scenario.object().cloned(),
+        &control.grasp_chambers,
+        scenario.trajectory.clone(),
+        scenario.pokes.clone(),
+    )
+    .with_trace(TRACE_PERIOD_MS);
+    let plant: SharedPlant = Arc::new(Mutex::new(plant));
+    let mut sensors = Vec::new();
+    let mut calibrations = Vec::new();
+    for finger in 0..FINGER_COUNT {
+        let (s, c) = make_sensor(
+            finger,
+            &params,
+            &plant,
+            scenario.frame_period_ms,
+            options.seed,
+        )?;
+        sensors.push(s);
+        calibrations.push(c);
+    }
+    // Calibration done: the simulated time starts now.
+    let clock = Clock::scaled(options.speed);
+    let firmware = dexitac_firmware::Config {
+        // The host gets the same wall-clock time to send a frame as on the rig.
+        host_silence_ms: (f64::from(options.stall_tolerance_ms) * clock.speed().max(1.0)) as u32,
+        ..dexitac_firmware::Config::default()
+    };
+    let mcu = SimMcu::spawn_with_plant(
+        SimMcuConfig {
+            firmware,
+            clock: Some(clock),
+            speed: clock.speed(),
+            ..SimMcuConfig::default()
+        },
+        Arc::clone(&plant),
+    )?;
+    let link_config = LinkConfig {
+        ack_timeout_ms: u64::from(options.stall_tolerance_ms / 4).max(20),
+        ..LinkConfig::default().scaled(clock.speed())
+    };
+    let port = serialport::new(mcu.port_path().to_string_lossy(), link_config.baud)
+        .timeout(Duration::from_millis(link_config.read_timeout_ms.max(1)))
+        .open()
+        .map_err(|source| LinkError::Open {
+            path: mcu.port_path().to_path_buf(),
+            source,
+        })?;
+    let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
+        Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
+    } else {
+        Box::new(port)
+    };
+    let mut link = Link::new(port, link_config);
+    let duration_ms = (scenario.duration_s * 1e3) as u64;
+    let (tx, rx) = mpsc::channel();
+    let live = Mutex::new(Live::default());
+    let finished = AtomicBool::new(false);
+    let stop = AtomicBool::new(false);
+    let mut collected = Collected::default();
+    let loop_result = std::thread::scope(|scope| {
+        scope.spawn(|| {
+            monitor(
+                &clock,
+                duration_ms,
+                &plant,
+                &live,
+                options,
+                &stop,
+                &finished,
+            )
+        });
+        let tap = options.event_tap.clone();
+        let collector = scope.spawn(|| collect(rx, &live, tap));
+        let result = dexitac_rig::task_loop::run(&control, &mut link, sensors, clock, &stop, &tx);
+        finished.store(true, Ordering::Relaxed);
+        drop(tx);
+        if let Ok(c) = collector.join() {
+            collected = c;
+        }
+        result
+    });
+    // Let the MCU apply the shutdown commands before reading its state.
+    std::thread::sleep(Duration::from_millis(20));
+    let mcu_at_end = mcu.snapshot();
+    let sim_s = clock.now_ms() as f64 / 1e3;
+    drop(mcu);
+    let plant = lock_plant(&plant);
+    let report = build_report(
+        scenario,
+        options,
+        &control,
+        &plant,
+        collected,
+        calibrations,
+        loop_result.map_err(|e| e.to_string()),
+        mcu_at_end,
+    );
+    Ok(SimReport {
+        sim_s,
+        wall_s: wall_start.elapsed().as_secs_f64(),
+        link_stats: link.stats(),
+        ..report
+    })
+}
+
+/// Ends the run and prints the status line.
+fn monitor(
+    clock: &Clock,
+    duration_ms: u64,
+    plant: &SharedPlant,
+    live: &Mutex<Live>,
+    options: &SimOptions,
+    stop: &AtomicBool,
+    finished: &AtomicBool,
+) {
+    let mut last_status = Instant::now();
+    while !finished.load(Ordering::Relaxed) {
+        let now = clock.now_ms();
+        let (state, dropped) = {
+            let p = lock_plant(plant);
+            (p.state().clone(), p.dropped_at_ms())
+        };
+        let (released, phase, centres) = {
+            let l = live.lock().unwrap_or_else(|e| e.into_inner());
+            (l.released_ms, l.phase.clone(), l.centres)
+        };
+        let ended = dropped.or(released).is_some_and(|t| now > t + AFTER_END_MS);
+        if now >= duration_ms || ended || options.stop.load(Ordering::Relaxed) {
+            stop.store(true, Ordering::Relaxed);
+        }
+        if options.status && last_status.elapsed() >= STATUS_PERIOD {
+            last_status = Instant::now();
+            eprint!("\r{}", status_line(&state, &phase, &centres));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    if options.status {
+        eprintln!();
+    }
+}
+
+fn status_line(s: &WorldState, phase: &str, centres: &[Option<CentreMm>; FINGER_COUNT]) -> String {
+    let valves: String = s
+        .valves
+        .iter()
+        .map(|v| match v {
+            ValveState::Hold => '.',
+            ValveState::Inflate => '+',
+            ValveState::Deflate => '-',
+        })
+        .collect();
+    let centre = |c: &Option<CentreMm>| match c {
+        Some(c) => format!("({:+5.2},{:+5.2})", c.x_mm, c.y_mm),
+        None => "(  none     )".to_string(),
+    };
+    let object = match s.object {
+        ObjectState::Absent => "none",
+        ObjectState::InGrasp if s.gripper_mm.0 > 1.0 => "lifted",
+        ObjectState::InGrasp => "on table",
+        ObjectState::Dropped => "DROPPED",
+    };
+    format!(
+        "t {:6.2} s | {:<12} | valves {valves} | tanks {:+5.1}/{:+5.1} kPa | c0 {} c1 {} mm | poke {:4.1} N | object {object:<8}",
+        s.t_ms as f64 / 1e3,
+        phase,
+        s.tanks_kpa.0,
+        s.tanks_kpa.1,
+        centre(&centres[0]),
+        centre(&centres[1]),
+        s.external_n,
+    )
+}
+
+#[derive(Default)]
+struct Collected {
+    decisions: Vec<(u64, dexitac_gripper::grasp::Decision)>,
+    commands: Vec<(u64, HostMsg, &'static str)>,
+    frame_to_command: Vec<Duration>,
+    observations: Vec<ObservationRecord>,
+    snapshots: Vec<Snapshot>,
+    max_loop_gap: Duration,
+    task_events: Vec<(u64, dexitac_gripper::manipulation::TaskEvent)>,
+}
+
+/// Gathers the loop's events; keeps the live view for the monitor.
+fn collect(
+    rx: mpsc::Receiver<RuntimeEvent>,
+    live: &Mutex<Live>,
+    tap: Option<mpsc::Sender<RuntimeEvent>>,
+) -> Collected {
+    let mut c = Collected::default();
+    for event in rx {
+        if let Some(tap) = &tap {
+            let _ = tap.send(event.clone());
+        }
+        let mut l = live.lock().unwrap_or_else(|e| e.into_inner());
+        match event {
+            RuntimeEvent::Observation(r) => {
+                if let Some(slot) = l.centres.get_mut(r.sensor) {
+                    *slot = r.centre_mm;
+                }
+                if let Some(slot) = l.markers.get_mut(r.sensor) {
+                    *slot = r.markers;
+                }
+                c.observations.push(ObservationRecord {
+                    sensor: r.sensor,
+                    t_ms: r.t_ms,
+                    centre_mm: r.centre_mm,
+                    pipeline_ms: r.pipeline_ms,
+                });
+            }
+            RuntimeEvent::Decision { t_ms, decision } => {
+                c.snapshots.push(Snapshot {
+                    t_ms,
+                    label: decision_label(&decision),
+                    markers: l.markers.clone(),
+                });
+                c.decisions.push((t_ms, decision));
+            }
+            RuntimeEvent::CommandSent {
+                t_ms,
+                msg,
+                reason,
+                from_frame,
+            } => {
+                l.phase = match reason {
+                    "stable: seal" | "open-loop seal" => "sealed",
+                    "disturbance: reopen inflation" => "reinforcing",
+                    "release" => "released",
+                    "close fingers" => "closing",
+                    "task: stroke" | "task: guard return" => "manipulating",
+                    "task: guard stop" => "guard stop",
+                    "task: completed" => "task done",
+                    _ => "charging",
+                }
+                .to_string();
+                if reason == "release" {
+                    l.released_ms.get_or_insert(t_ms);
+                }
+                if let Some(d) = from_frame {
+                    c.frame_to_command.push(d);
+                }
+                c.commands.push((t_ms, msg, reason));
+            }
+            RuntimeEvent::Stopped { max_loop_gap, .. } => c.max_loop_gap = max_loop_gap,
+            RuntimeEvent::Telemetry { .. } => {}
+            RuntimeEvent::Task { t_ms, event } => c.task_events.push((t_ms, event)),
+        }
+    }
+    c
+}
+
+fn decision_label(d: &dexitac_gripper::grasp::Decision) -> String {
+    match (d.command, d.cause) {
+        (Command::Seal, _) => "seal".into(),
+        (Command::ReopenInflation, Cause::Disturbance { sensor, .. }) => {
+            format!("disturbance-s{sensor}")
+        }
+        (Command::ReopenInflation, _) => "reopen".into(),
+        (Command::Release, Cause::Slip { sensor, .. }) => format!("slip-s{sensor}"),
+        (Command::Release, Cause::ContactLost { sensor }) => format!("contact-lost-s{sensor}"),
+        (Command::Release, Cause::NoContact { .. }) => "no-contact".into(),
+        (Command::Release, _) => "release".into(),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_report(
+    scenario: &Scenario,
+    options: &SimOptions,
+    control: &ControlConfig,
+    plant: &Plant,
+    c: Collected,
+    calibrations: Vec<Calibration>,
+    loop_result: Result<StopReason, String>,
+    mcu_at_end: McuSnapshot,
+) -> SimReport {
+    let released_ms = c
+        .commands
+        .iter()
+        .find(|(_, _, r)| *r == "release")
+        .map(|(t, _, _)| *t);
+    let dropped_ms = plant.dropped_at_ms();
+    let outcome = match (scenario.object().is_some(), released_ms, dropped_ms) {
+        (false, Some(_), _) => Outcome::Released,
+        (false, None, _) => Outcome::NotGrasped,
+        (true, Some(r), d) if d.is_none_or(|d| r <= d) => Outcome::Released,
+        (true, _, Some(_)) => Outcome::Dropped,
+        (true, _, None) => Outcome::Held,
+    };
+    let closing_ms = c
+        .commands
+        .iter()
+        .find(|(_, _, r)| *r == "close fingers")
+        .map(|(t, _, _)| *t);
+    let stable_ms = c
+        .decisions
+        .iter()
+        .find(|(_, d)| d.command == Command::Seal)
+        .map(|(t, _)| *t);
+    let time_to_stable_s = closing_ms
+        .zip(stable_ms)
+        .map(|(a, b)| b.saturating_sub(a) as f64 / 1e3);
+    let disturbances = disturbance_timings(scenario, control, plant, &c);
+    let task = scenario
+        .task
+        .as_ref()
+        .and_then(|t| task_report(t, c.task_events, plant.trace()));
+    SimReport {
+        scenario: scenario.name.clone(),
+        tactile_feedback: options.tactile_feedback,
+        outcome,
+        time_to_stable_s,
+        disturbances,
+        decisions: c.decisions,
+        commands: c.commands,
+        frame_to_command: c.frame_to_command,
+        observations: c.observations,
+        trace: plant.trace().to_vec(),
+        transitions: plant.transitions().to_vec(),
+        dropped_at_ms: dropped_ms,
+        snapshots: c.snapshots,
+        calibrations,
+        loop_result,
+        mcu_at_end,
+        link_stats: LinkStats::default(),
+        max_loop_gap: c.max_loop_gap,
+        grasp_chambers: control.grasp_chambers.clone(),
+        task,
+        sim_s: 0.0,
+        wall_s: 0.0,
+    }
+}
+
+fn disturbance_timings(
+    scenario: &Scenario,
+    control: &ControlConfig,
+    plant: &Plant,
+    c: &Collected,
+) -> Vec<DisturbanceTiming> {
+    let mut pokes = scenario.pokes.clone();
+    pokes.sort_by(|a, b| a.at_s.total_cmp(&b.at_s));
+    let inflating = |chambers: &dexitac_protocol::Chambers| {
+        control
+            .grasp_chambers
+            .iter()
+            .all(|&i| chambers.get(i) == Some(&ValveState::Inflate))
+    };
+    (0..pokes.len())
+        .map(|i| {
+            let poke = pokes[i];
+            let onset_ms = (poke.at_s * 1e3) as u64;
+            let end_ms = pokes.get(i + 1).map_or(u64::MAX, |p| (p.at_s * 1e3) as u64);
+            let within = |t: u64| t >= onset_ms && t < end_ms;
+            let detected = c
+                .decisions
+                .iter()
+                .find(|(t, d)| within(*t) && d.command == Command::ReopenInflation)
+                .map(|(t, _)| *t);
+            let sent = detected.and_then(|d| {
+                c.commands
+                    .iter()
+                    .find(|(t, _, r)| *t >= d && *r == "disturbance: reopen inflation")
+                    .map(|(t, _, _)| *t)
+            });
+            // The first opening after the decision. The simulated MCU stamps
+            // a tick with the time it simulates; when its thread lags the
+            // clock by a few ms, the tick that applies the command carries a
+            // time slightly before the write: look back by that lag and
+            // clamp to the write.
+            let open = sent.zip(detected).and_then(|(s, d)| {
+                plant
+                    .transitions()
+                    .iter()
+                    .find(|(t, ch)| *t + MCU_LAG_MS >= d && inflating(ch))
+                    .map(|(t, _)| (*t).max(s))
+            });
+            let s = |t: Option<u64>| t.map(|t| t as f64 / 1e3);
+            DisturbanceTiming {
+                poke,
+                t_onset_s: poke.at_s,
+                t_detected_s: s(detected),
+                t_reopen_sent_s: s(sent),
+                t_valves_open_s: s(open),
+            }
+        })
+        .collect()
+}

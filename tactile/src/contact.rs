@@ -1,0 +1,599 @@
+//! Stages 4-5, contact (Sec. III-B, Eq. 2): the contact region R is the
+//! largest 4-connected region of low density inside the sensing mask, the
+//! contact centre is the argmin over R, refined to sub-pixel by a parabola
+//! through the neighbouring samples in x and in y.
+//!
+//! "Low density" is either the paper's absolute rule, `d < T` (markers per
+//! mm^2), or the default relative rule `d < t d_rest` with the rest density
+//! at the same sample; the relative rule also takes the argmin of
+//! `d / d_rest`, which removes the bias of the density fall-off at the rim
+//! (SPEC section 3; measured in BENCHMARKS.md). Regions smaller than
+//! `min_area_mm2` are not contacts.
+//!
+//! With [`CentreMethod::Hybrid`] the centre comes from the tracked markers
+//! around the region ([`crate::tracking::radial_centre`]) when that fit is
+//! consistent, and contacts too small to dent the density (width below ~h)
+//! are found from the tracked markers alone.
+//!
+//! ```
+//! use crate::contact::{segment, Region};
+//! use crate::density::{DensityMap, Grid};
+//! use crate::params::{ContactParams, ThresholdMode};
+//! // A 5x5 density map (step 1) with a dent at (3, 2); rest density 1.
+//! let grid = Grid::new(5, 5, 1);
+//! let mut v = vec![1.0f32; 25];
+//! v[2 * 5 + 3] = 0.2;
+//! v[2 * 5 + 2] = 0.6;
+//! let map = DensityMap { grid, roi: grid.full(), values_per_mm2: v };
+//! let rest = DensityMap { grid, roi: grid.full(), values_per_mm2: vec![1.0; 25] };
+//! let params = ContactParams { min_area_mm2: 0.0, ..ContactParams::default() };
+//! let r: Region = segment(&map, &rest, &[true; 25], &params, 1.0).unwrap();
+//! assert_eq!(r.cells, 2);
+//! assert!((r.centre.x - 3.0).abs() < 0.5 && (r.centre.y - 2.0).abs() < 0.5);
+//! ```
+
+use crate::density::DensityMap;
+use crate::params::{CentreMethod, ContactParams, ThresholdMode};
+use crate::tracking::{self, Field};
+use crate::PointPx;
+
+/// The contact region found in a density map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Region {
+    /// Sub-pixel argmin of the score over the region, working px.
+    pub centre: PointPx,
+    /// Grid cells in the region.
+    pub cells: usize,
+    /// Region area, mm^2.
+    pub area_mm2: f64,
+    /// Lowest score (density / rest, or density per mm^2).
+    pub depth: f32,
+}
+
+/// Where a contact's centre came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Argmin of the density over the region.
+    Density,
+    /// Radial centre of the tracked markers around the density region.
+    DensityTracked,
+    /// Tracked markers alone (contact too small for the density).
+    Tracking,
+}
+
+impl Source {
+    /// Short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Source::Density => "density",
+            Source::DensityTracked => "density+tracking",
+            Source::Tracking => "tracking",
+        }
+    }
+}
+
+/// A contact.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Contact {
+    /// Contact centre, working px.
+    pub centre: PointPx,
+    /// Contact area, mm^2 (for tracking-only contacts: the disc through the
+    /// median moved marker).
+    pub area_mm2: f64,
+    /// How the centre was found.
+    pub source: Source,
+}
+
+/// Stage 4 entry: the largest low-density region of `map` (inside its ROI and
+/// the mask), or `None` when there is none of at least `min_area_mm2`.
+/// `rest` and `mask` are on the same grid as `map`.
+pub fn segment(
+    map: &DensityMap,
+    rest: &DensityMap,
+    mask: &[bool],
+    params: &ContactParams,
+    mm_per_px: f64,
+) -> Option<Region> {
+    let g = map.grid;
+    let roi = map.roi;
+    let n = g.nx * g.ny;
+    if rest.values_per_mm2.len() != n || mask.len() != n || roi.area() == 0 {
+        return None;
+    }
+    let score = |i: usize, j: usize| -> f32 {
+        let k = j * g.nx + i;
+        match params.threshold {
+            ThresholdMode::Relative => {
+                map.values_per_mm2[k] / rest.values_per_mm2[k].max(f32::MIN_POSITIVE)
+            }
+            ThresholdMode::Absolute => map.values_per_mm2[k],
+        }
+    };
+    let limit = match params.threshold {
+        ThresholdMode::Relative => params.relative_threshold as f32,
+        ThresholdMode::Absolute => params.absolute_threshold_per_mm2 as f32,
+    };
+    let usable = |i: usize, j: usize| roi.contains(i, j) && mask[j * g.nx + i];
+    let mut seen = vec![false; n];
+    let mut stack = Vec::new();
+    let mut best: Option<(usize, (usize, usize), f32)> = None;
+    for j in roi.j0..roi.j1 {
+        for i in roi.i0..roi.i1 {
+            let k = j * g.nx + i;
+            // `is_lt` is false for NaN: a NaN sample is never in a region.
+            if seen[k]
+                || !usable(i, j)
+                || !score(i, j).partial_cmp(&limit).is_some_and(|o| o.is_lt())
+            {
+                continue;
+            }
+            seen[k] = true;
+            stack.push((i, j));
+            let mut count = 0;
+            let mut low = ((i, j), score(i, j));
+            while let Some((ci, cj)) = stack.pop() {
+                count += 1;
+                let s = score(ci, cj);
+                if s < low.1 {
+                    low = ((ci, cj), s);
+                }
+                let neighbours = [
+                    (ci.wrapping_sub(1), cj),
+                    (ci + 1, cj),
+                    (ci, cj.wrapping_sub(1)),
+                    (ci, cj + 1),
+                ];
+                for (ni, nj) in neighbours {
+                    if ni < g.nx && nj < g.ny && usable(ni, nj) {
+                        let nk = nj * g.nx + ni;
+                        if !seen[nk] && score(ni, nj).partial_cmp(&limit).is_some_and(|o| o.is_lt())
+                        {
+                            seen[nk] = true;
+                            stack.push((ni, nj));
+                        }
+                    }
+                }
+            }
+            if best.is_none_or(|b| count > b.0) {
+                best = Some((count, low.0, low.1));
+            }
+        }
+    }
+    let (cells, (i, j), depth) = best?;
+    let step = g.step_px as f64;
+    let area_mm2 = cells as f64 * step * step * mm_per_px * mm_per_px;
+    if area_mm2 < params.min_area_mm2 {
+        return None;
+    }
+    let offset = |a: Option<(usize, usize)>, b: Option<(usize, usize)>| -> f64 {
+        match (
+            a.filter(|&(x, y)| usable(x, y)),
+            b.filter(|&(x, y)| usable(x, y)),
+        ) {
+            (Some(a), Some(b)) => {
+                let (sa, s0, sb) = (score(a.0, a.1) as f64, depth as f64, score(b.0, b.1) as f64);
+                let curv = sa - 2.0 * s0 + sb;
+                if curv > 0.0 {
+                    (0.5 * (sa - sb) / curv).clamp(-0.5, 0.5)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        }
+    };
+    let left = i.checked_sub(1).map(|x| (x, j));
+    let up = j.checked_sub(1).map(|y| (i, y));
+    let dx = offset(left, Some((i + 1, j)).filter(|p| p.0 < g.nx));
+    let dy = offset(up, Some((i, j + 1)).filter(|p| p.1 < g.ny));
+    // A flat-bottomed dent (contact wider than h) has a noisy argmin: fit a
+    // quadratic surface over the cells within half the region's radius.
+    let radius_cells = (cells as f64 / std::f64::consts::PI).sqrt();
+    let reach = (0.5 * radius_cells)
+        .max(2.0)
+        .min(2.0 * params_reach_cells(map));
+    let (qx, qy) = quadratic_vertex(i, j, reach, &usable, &score)
+        .filter(|&(x, y)| x.hypot(y) <= reach)
+        .unwrap_or((dx, dy));
+    Some(Region {
+        centre: g.point(i as f64 + qx, j as f64 + qy),
+        cells,
+        area_mm2,
+        depth,
+    })
+}
+
+/// Upper bound of the quadratic-fit window, grid cells (a kernel width h of
+/// 15 px at the map's step).
+fn params_reach_cells(map: &DensityMap) -> f64 {
+    crate::params::KERNEL_WIDTH_PX / map.grid.step_px as f64
+}
+
+/// Least-squares fit of `s = a + b x + c y + d x^2 + e xy + f y^2` to the
+/// usable samples within `reach` cells of `(i, j)`; returns the vertex
+/// offset when the surface is a bowl.
+fn quadratic_vertex(
+    i: usize,
+    j: usize,
+    reach: f64,
+    usable: &dyn Fn(usize, usize) -> bool,
+    score: &dyn Fn(usize, usize) -> f32,
+) -> Option<(f64, f64)> {
+    let r = reach.floor() as i64;
+    let mut ata = [[0f64; 6]; 6];
+    let mut atb = [0f64; 6];
+    let mut n = 0;
+    for dj in -r..=r {
+        for di in -r..=r {
+            let (x, y) = (di as f64, dj as f64);
+            let (ci, cj) = (i as i64 + di, j as i64 + dj);
+            if x.hypot(y) > reach || ci < 0 || cj < 0 || !usable(ci as usize, cj as usize) {
+                continue;
+            }
+            let v = score(ci as usize, cj as usize) as f64;
+            if !v.is_finite() {
+                continue;
+            }
+            let row = [1.0, x, y, x * x, x * y, y * y];
+            for a in 0..6 {
+                for b in 0..6 {
+                    ata[a][b] += row[a] * row[b];
+                }
+                atb[a] += row[a] * v;
+            }
+            n += 1;
+        }
+    }
+    if n < 9 {
+        return None;
+    }
+    let c = solve6(ata, atb)?;
+    let (b, cc, d, e, f) = (c[1], c[2], c[3], c[4], c[5]);
+    let det = 4.0 * d * f - e * e;
+    if d <= 0.0 || det <= 1e-12 {
+        return None;
+    }
+    let x = (-2.0 * f * b + e * cc) / det;
+    let y = (-2.0 * d * cc + e * b) / det;
+    (x.is_finite() && y.is_finite()).then_some((x, y))
+}
+
+/// Gaussian elimination with partial pivoting; `None` when singular.
+fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
+    for col in 0..6 {
+        let piv = (col..6).max_by(|&p, &q| a[p][col].abs().total_cmp(&a[q][col].abs()))?;
+        if a[piv][col].abs() < 1e-12 {
+            return None;
+        }
+        a.swap(col, piv);
+        b.swap(col, piv);
+        let (pivot, pb) = (a[col], b[col]);
+        for row in col + 1..6 {
+            let f = a[row][col] / pivot[col];
+            for (x, p) in a[row][col..].iter_mut().zip(&pivot[col..]) {
+                *x -= f * p;
+            }
+            b[row] -= f * pb;
+        }
+    }
+    let mut x = [0f64; 6];
+    for row in (0..6).rev() {
+        let s: f64 = (row + 1..6).map(|k| a[row][k] * x[k]).sum();
+        x[row] = (b[row] - s) / a[row][row];
+    }
+    Some(x)
+}
+
+/// The tracked centre replaces the density centre only when the
+/// displacement lines meet this tightly (RMS of the inlier lines, px)...
+pub const MAX_FIT_RESIDUAL_PX: f64 = 0.6;
+/// ... and the inlier lines carry at least this share of the weight. Shear
+/// bends the lines away from one point (measured: 3-9 px off on the shear
+/// scenes with looser limits), so sheared contacts keep the density centre.
+pub const MIN_INLIER_SHARE: f64 = 0.6;
+
+/// Stage 5 entry: the contact from the density region and the tracked
+/// markers, by `params.centre`.
+pub fn locate(
+    region: Option<Region>,
+    rest: &[PointPx],
+    field: &Field,
+    pitch_px: f64,
+    params: &ContactParams,
+    mm_per_px: f64,
+) -> Option<Contact> {
+    let from_region = |r: Region| Contact {
+        centre: r.centre,
+        area_mm2: r.area_mm2,
+        source: Source::Density,
+    };
+    match (params.centre, region) {
+        (CentreMethod::Density, r) => r.map(from_region),
+        (CentreMethod::Hybrid, Some(r)) => {
+            let radius_px = (r.area_mm2 / std::f64::consts::PI).sqrt() / mm_per_px;
+            let reach = radius_px + 2.0 * pitch_px;
+            let near = near_markers(rest, field, r.centre, reach);
+            match tracking::radial_centre(rest, field, &near, field.moved_px) {
+                Some(fit)
+                    if fit.n_inliers >= params.min_moved_markers
+                        && fit.inlier_share >= MIN_INLIER_SHARE
+                        && fit.residual_px <= MAX_FIT_RESIDUAL_PX
+                        && dist(fit.centre, r.centre) <= radius_px.max(pitch_px) =>
+                {
+                    Some(Contact {
+                        centre: fit.centre,
+                        area_mm2: r.area_mm2,
+                        source: Source::DensityTracked,
+                    })
+                }
+                _ => Some(from_region(r)),
+            }
+        }
+        (CentreMethod::Hybrid, None) => small_contact(rest, field, pitch_px, params, mm_per_px),
+    }
+}
+
+/// A tracked marker counts as support of a small contact when its
+/// displacement exceeds this many sigmas of the frame's jitter (below the
+/// "moved" test: the faint ring around a tiny press).
+pub const SUPPORT_SIGMAS: f64 = 3.0;
+/// A marker displaced by more than this many times the "moved" threshold
+/// (24 sigma of the frame's jitter at the default 6 sigma) is *strongly*
+/// moved: a press moves at least one marker this far (a tiny press on or
+/// next to a marker moves it by ~1 px, a press that dents the density by
+/// 1.4 px or more), while noise and the frozen noise of the rest frame
+/// stay below it.
+pub const STRONG_MOVE_FACTOR: f64 = 4.0;
+
+/// Strongly moved is capped at this fraction of the marker pitch (2.25 px
+/// at 15 px): no marker noise moves a marker this far, and a frame where
+/// most markers moved (a press over most of the sensor, which inflates the
+/// jitter estimate) is still looked at.
+pub const STRONG_MOVE_MAX_PITCH: f64 = 0.15;
+
+/// The displacement beyond which a marker is strongly moved, px.
+pub fn strong_move_px(field: &Field, pitch_px: f64) -> f64 {
+    (STRONG_MOVE_FACTOR * field.moved_px).min(STRONG_MOVE_MAX_PITCH * pitch_px)
+}
+
+/// Rest markers (indices) displaced by more than [`strong_move_px`] (lost
+/// markers are not: dropout is not a press). Scans every tracked marker, not
+/// only `field.moved`: a press over most of the sensor inflates the jitter
+/// estimate and with it the moved threshold, while the strong threshold is
+/// capped.
+pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usize> + '_ {
+    let strong2 = strong_move_px(field, pitch_px).powi(2);
+    field
+        .displacement
+        .iter()
+        .enumerate()
+        .filter_map(move |(n, u)| {
+            let u = (*u)?;
+            let d2 = u.x * u.x + u.y * u.y;
+            // A NaN displacement is looked at, not silently dropped (the
+            // later stages reject it).
+            (d2 > strong2 || d2.is_nan()).then_some(n)
+        })
+}
+
+/// True when the field may hold a contact: some marker moved strongly
+/// ([`STRONG_MOVE_FACTOR`]). Otherwise the pipeline skips the density
+/// stages (weakly moved or lost markers alone are noise or dropout).
+pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
+    strongly_moved(field, pitch_px).next().is_some()
+}
+
+/// A contact too small for the density: a cluster of consistently radially
+/// displaced markers around the most displaced one. The fit uses every
+/// tracked marker within 2.5 pitches of it whose displacement is above
+/// [`SUPPORT_SIGMAS`] of the frame's jitter (not only the "moved" ones), with
+/// a direction tolerance that grows with the jitter
+/// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
+/// through one point.
+fn small_contact(
+    rest: &[PointPx],
+    field: &Field,
+    pitch_px: f64,
+    params: &ContactParams,
+    mm_per_px: f64,
+) -> Option<Contact> {
+    let magnitude = |n: usize| -> Option<f64> {
+        let u = (*field.displacement.get(n)?)?;
+        Some(u.x.hypot(u.y))
+    };
+    let seed = field
+        .moved
+        .iter()
+        .filter_map(|&n| Some((n, magnitude(n)?)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    if seed.1.is_nan() || seed.1 <= strong_move_px(field, pitch_px) {
+        return None;
+    }
+    let support_px = if field.jitter_px > 0.0 {
+        (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
+    } else {
+        field.moved_px
+    };
+    let centre = rest[seed.0];
+    let reach = 2.5 * pitch_px;
+    let near: Vec<usize> = rest
+        .iter()
+        .enumerate()
+        .filter(|&(n, &p)| dist(p, centre) <= reach && magnitude(n).is_some_and(|m| m > support_px))
+        .map(|(n, _)| n)
+        .collect();
+    let fit = tracking::radial_centre_noisy(rest, field, &near, support_px, field.jitter_px)?;
+    let mut d: Vec<f64> = near
+        .iter()
+        .filter(|&&n| magnitude(n).is_some_and(|m| m > field.moved_px))
+        .map(|&n| dist(rest[n], fit.centre))
+        .collect();
+    let ok = fit.n_inliers >= params.min_moved_markers
+        && d.len() >= 2
+        && fit.inlier_share >= 0.6
+        && dist(fit.centre, centre) <= 1.5 * pitch_px;
+    if !ok {
+        return None;
+    }
+    if d.is_empty() {
+        return None;
+    }
+    let k = d.len() / 2;
+    let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
+    Some(Contact {
+        centre: fit.centre,
+        area_mm2: std::f64::consts::PI * (r_px * mm_per_px).powi(2),
+        source: Source::Tracking,
+    })
+}
+
+/// Moved rest markers within `reach_px` of `c`.
+fn near_markers(rest: &[PointPx], field: &Field, c: PointPx, reach_px: f64) -> Vec<usize> {
+    field
+        .moved
+        .iter()
+        .copied()
+        .filter(|&n| dist(rest[n], c) <= reach_px)
+        .collect()
+}
+
+fn dist(a: PointPx, b: PointPx) -> f64 {
+    (a.x - b.x).hypot(a.y - b.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::density::Grid;
+
+    fn maps(values: Vec<f32>, w: usize, h: usize) -> (DensityMap, DensityMap) {
+        let grid = Grid::new(w, h, 1);
+        (
+            DensityMap {
+                grid,
+                roi: grid.full(),
+                values_per_mm2: values,
+            },
+            DensityMap {
+                grid,
+                roi: grid.full(),
+                values_per_mm2: vec![1.0; w * h],
+            },
+        )
+    }
+
+    fn loose() -> ContactParams {
+        ContactParams {
+            min_area_mm2: 0.0,
+            ..ContactParams::default()
+        }
+    }
+
+    #[test]
+    fn largest_region_wins_and_centre_is_its_minimum() {
+        let mut v = vec![1.0f32; 100];
+        v[11] = 0.1; // one-cell region with the global minimum
+        for k in [55, 56, 65, 66, 75] {
+            v[k] = 0.5;
+        }
+        v[66] = 0.3;
+        let (map, rest) = maps(v, 10, 10);
+        let r = segment(&map, &rest, &[true; 100], &loose(), 1.0).unwrap();
+        assert_eq!(r.cells, 5);
+        assert!((r.centre.x - 6.0).abs() < 0.5 && (r.centre.y - 6.0).abs() < 0.5);
+    }
+
+    #[test]
+    fn min_area_and_mask_reject_regions() {
+        let mut v = vec![1.0f32; 100];
+        v[44] = 0.1;
+        let (map, rest) = maps(v, 10, 10);
+        let mut p = loose();
+        p.min_area_mm2 = 2.0;
+        assert!(segment(&map, &rest, &[true; 100], &p, 1.0).is_none());
+        let mut mask = [true; 100];
+        mask[44] = false;
+        assert!(segment(&map, &rest, &mask, &loose(), 1.0).is_none());
+    }
+
+    #[test]
+    fn absolute_rule_compares_density_not_ratio() {
+        let (map, mut rest) = maps(vec![0.5f32; 16], 4, 4);
+        rest.values_per_mm2 = vec![0.55; 16];
+        let mut p = loose();
+        assert!(segment(&map, &rest, &[true; 16], &p, 1.0).is_none());
+        p.threshold = ThresholdMode::Absolute;
+        p.absolute_threshold_per_mm2 = 0.6;
+        assert_eq!(
+            segment(&map, &rest, &[true; 16], &p, 1.0).unwrap().cells,
+            16
+        );
+    }
+
+    #[test]
+    fn nan_and_mismatched_inputs_give_no_region() {
+        let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
+        assert!(segment(&map, &rest, &[true; 16], &loose(), 1.0).is_none());
+        assert!(segment(&map, &rest, &[true; 3], &loose(), 1.0).is_none());
+    }
+
+    #[test]
+    fn a_press_over_most_of_the_sensor_is_still_looked_at() {
+        // 90 % of the markers moved 3 px: the jitter estimate is inflated
+        // (the lower quartile is a moved marker), the strong threshold is
+        // capped at 0.15 pitch, and the frame is not skipped.
+        let rest = crate::test_fixtures::hex_points(200, 200, 15.0);
+        let cur: Vec<PointPx> = rest
+            .iter()
+            .enumerate()
+            .map(|(n, p)| {
+                let d = if n % 10 == 0 { 0.0 } else { 3.0 };
+                PointPx::new(p.x + d, p.y)
+            })
+            .collect();
+        let field = tracking::track_adaptive(&rest, &cur, 200, 200, 7.5, 0.1, 6.0);
+        assert!(6.0 * field.jitter_px > 2.25, "{}", field.jitter_px);
+        assert!((strong_move_px(&field, 15.0) - 2.25).abs() < 1e-12);
+        assert!(worth_a_look(&field, 15.0));
+        // A NaN displacement is looked at (and then rejected downstream),
+        // never silently taken as "not moved".
+        let mut nan = tracking::track_adaptive(&rest, &rest, 200, 200, 7.5, 0.1, 6.0);
+        assert!(!worth_a_look(&nan, 15.0));
+        nan.displacement[3] = Some(PointPx::new(f64::NAN, 0.0));
+        nan.moved.push(3);
+        assert!(worth_a_look(&nan, 15.0));
+        assert!(locate(None, &rest, &nan, 15.0, &ContactParams::default(), 0.1).is_none());
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn noise_dropout_and_frozen_rest_noise_are_never_a_contact(
+            sigma in 0.0f64..0.1,
+            noisy_share in 0.0f64..0.05,
+            lost_share in 0.0f64..0.1,
+            seed in proptest::prelude::any::<u64>(),
+        ) {
+            // Every marker jitters (Gaussian, sigma per axis, frame and rest
+            // noise; up to twice the 0.05 px of the noisiest synthetic
+            // scenes), a few jitter 3x more (rim, low contrast), some are
+            // lost: nothing moved strongly, the frame is skipped, and the
+            // tracking-only rule finds no contact.
+            let mut rng = crate::synth::Rng::new(seed);
+            let rest = crate::test_fixtures::hex_points(320, 320, 15.0);
+            let mut cur = Vec::new();
+            for p in &rest {
+                if rng.unit() < lost_share {
+                    continue;
+                }
+                let s = if rng.unit() < noisy_share { 3.0 * sigma } else { sigma };
+                cur.push(PointPx::new(p.x + s * rng.normal(), p.y + s * rng.normal()));
+            }
+            let params = ContactParams::default();
+            let field = tracking::track_adaptive(
+                &rest, &cur, 320, 320, 7.5, params.move_noise_px, params.move_noise_sigmas,
+            );
+            proptest::prop_assert!(!worth_a_look(&field, 15.0), "{:?}", field.moved_px);
+            proptest::prop_assert!(locate(None, &rest, &field, 15.0, &params, 0.1).is_none());
+        }
+    }
+}
