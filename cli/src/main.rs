@@ -80,7 +80,7 @@ pub struct AnalyzeArgs {
     /// Output CSV, one row per frame.
     #[arg(long, value_name = "PRED.csv")]
     out: PathBuf,
-    /// Write the detected markers of each frame to DIR/<frame>.csv (x,y).
+    /// Write the detected markers of each frame to `DIR/<frame>.csv` (x,y).
     #[arg(long, value_name = "DIR")]
     markers_out: Option<PathBuf>,
     /// Frames (PNG or JPEG files, or directories of them).

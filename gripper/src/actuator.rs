@@ -315,7 +315,7 @@ pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>, FitError> {
 ///
 /// ```
 /// let pts = [(0.0, 1.0), (10.0, 16.0), (20.0, 31.0), (30.0, 46.0)];
-/// let fit = crate::actuator::fit_line(&pts).unwrap();
+/// let fit = dexitac_gripper::actuator::fit_line(&pts).unwrap();
 /// assert!((fit.slope_deg_per_kpa - 1.5).abs() < 1e-12);
 /// assert!((fit.intercept_deg - 1.0).abs() < 1e-12);
 /// ```

@@ -25,7 +25,7 @@
 //! real palm.
 //!
 //! ```
-//! use crate::configuration::{FingerType, Preset};
+//! use dexitac_gripper::configuration::{FingerType, Preset};
 //! let hook = Preset::HookGrip.config();
 //! assert_eq!(hook.finger, FingerType::DexRot);
 //! assert_eq!(hook.fingers.len(), 2);

@@ -239,7 +239,7 @@ impl SensorTrack {
 /// Algorithm 1 for two fused sensors.
 ///
 /// ```
-/// use crate::grasp::{CentreMm, Command, Grasp, GraspParams, Observation};
+/// use dexitac_gripper::grasp::{CentreMm, Command, Grasp, GraspParams, Observation};
 /// let mut grasp = Grasp::new(GraspParams::default());
 /// grasp.start(0);
 /// let at = |t_ms| Observation { t_ms, centre_mm: Some(CentreMm { x_mm: 1.0, y_mm: 2.0 }) };

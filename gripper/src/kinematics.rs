@@ -155,7 +155,7 @@ pub fn sinc(x: f64) -> f64 {
 /// `sin t / t = sinc t`, so `theta = 0` gives the straight `Tz(length)`.
 ///
 /// ```
-/// use crate::kinematics::arc;
+/// use dexitac_gripper::kinematics::arc;
 /// let quarter = arc(26.0, std::f64::consts::FRAC_PI_2, 0.0);
 /// let r = 26.0 / std::f64::consts::FRAC_PI_2; // radius of curvature
 /// assert!((quarter.translation_mm[0] - r).abs() < 1e-12);

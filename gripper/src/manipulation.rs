@@ -23,7 +23,7 @@
 //! the twist went (there is no angle sensor; a timed backward stroke would
 //! overshoot).
 //!
-//! The primitive is part of the host's task loop ([`dexitac_rig::task_loop`]), so
+//! The primitive is part of the host's task loop (`dexitac_rig::task_loop`), so
 //! the same code runs on the simulated and on the real rig. While it runs it
 //! owns the grasp: the grasp state machine is no longer fed (the moving
 //! object shifts the contact centres by design); the guards above take its
@@ -35,7 +35,7 @@ use crate::grasp::{CentreMm, SENSOR_COUNT};
 
 /// The manipulation joint's chamber pair of each finger: (forward, backward).
 /// The Dex joint's side bellows (chambers 2/3 and 6/7), which a two-finger
-/// grasp leaves sealed ([`dexitac_rig::task_loop::DEFAULT_GRASP_CHAMBERS`]).
+/// grasp leaves sealed (`dexitac_rig::task_loop::DEFAULT_GRASP_CHAMBERS`).
 pub const MANIPULATION_CHAMBERS: [[usize; 2]; SENSOR_COUNT] = [[2, 3], [6, 7]];
 
 /// The four tasks of the paper.

@@ -87,7 +87,7 @@ pub struct SensorReport {
     pub pipeline_ms: f64,
     /// The contact in working px (centre, area, how it was found).
     pub contact: Option<Contact>,
-    /// The working grey frame, when [`ControlConfig::share_frames`] is
+    /// The working grey frame, when [`ControlConfig::share_frames`](crate::task_loop::ControlConfig::share_frames) is
     /// set (recording, live view); `None` otherwise.
     pub frame: Option<Arc<GreyFrame>>,
 }

@@ -16,9 +16,9 @@
 //! are found from the tracked markers alone.
 //!
 //! ```
-//! use crate::contact::{segment, Region};
-//! use crate::density::{DensityMap, Grid};
-//! use crate::params::{ContactParams, ThresholdMode};
+//! use dexitac_tactile::contact::{segment, Region};
+//! use dexitac_tactile::density::{DensityMap, Grid};
+//! use dexitac_tactile::params::{ContactParams, ThresholdMode};
 //! // A 5x5 density map (step 1) with a dent at (3, 2); rest density 1.
 //! let grid = Grid::new(5, 5, 1);
 //! let mut v = vec![1.0f32; 25];

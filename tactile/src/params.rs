@@ -7,7 +7,7 @@
 //! overrides any subset of fields:
 //!
 //! ```
-//! let params = crate::params::Params::from_toml_str(
+//! let params = dexitac_tactile::params::Params::from_toml_str(
 //!     "[density]\nkernel_width_px = 12.0\n[contact]\nthreshold = \"absolute\"\n",
 //! )
 //! .unwrap();

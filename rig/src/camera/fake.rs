@@ -5,8 +5,8 @@
 //! would behave.
 //!
 //! ```
-//! use crate::camera::fake::FakeDevice;
-//! use crate::camera::{decode, PixelFormat, RawDevice, CaptureRequest};
+//! use dexitac_rig::camera::fake::FakeDevice;
+//! use dexitac_rig::camera::{decode, PixelFormat, RawDevice, CaptureRequest};
 //! use dexitac_tactile::frame::GreyFrame;
 //! use std::time::Duration;
 //!
