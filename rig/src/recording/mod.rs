@@ -88,6 +88,3 @@ pub mod topic {
         Some((index.parse().ok()?, leaf))
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -1,4 +1,5 @@
-//! Round trip, replay and damaged-file tests of the recorder and reader.
+//! Round trip, replay and damaged-file tests of the recorder and reader
+//! (`dexitac_rig::recording`), on frames of the simulated fingertip.
 
 use std::io::Cursor;
 use std::path::Path;
@@ -9,10 +10,10 @@ use dexitac_protocol::{
     ArmState, FaultFlags, HostMsg, Telemetry, ValveState, CHAMBER_COUNT, NO_READING_PA,
 };
 
-use super::*;
-use crate::event::{RuntimeEvent, StopReason};
 use dexitac_gripper::grasp::{Cause, Command, Decision};
 use dexitac_gripper::manipulation::TaskEvent;
+use dexitac_rig::event::{RuntimeEvent, StopReason};
+use dexitac_rig::recording::*;
 use dexitac_sim::plant::ContactState;
 use dexitac_sim::render::Renderer;
 use dexitac_tactile::calibrate;
@@ -245,7 +246,7 @@ fn replay_with_other_parameters_reports_the_difference() {
 
 #[test]
 fn replay_source_plays_one_sensor_in_order() {
-    use crate::source::{Clock, FrameSource};
+    use dexitac_rig::source::{Clock, FrameSource};
     let (bytes, pressed, _) = record(1);
     let rec = read(&bytes).unwrap();
     let mut src = ReplaySource::new(&rec, 0, false);
@@ -318,15 +319,17 @@ fn spawned_recorder_writes_a_channel_of_events() {
     let thread = rec.spawn();
     let tx = thread.sender();
     let (_, pressed) = frames(5, 1);
-    tx.send(RuntimeEvent::Observation(crate::event::SensorReport {
-        sensor: 1,
-        t_ms: 7,
-        centre_mm: None,
-        markers: Arc::new(vec![dexitac_tactile::PointPx::new(1.234_567, 2.0)]),
-        pipeline_ms: 3.0,
-        contact: None,
-        frame: Some(Arc::new(pressed[0].clone())),
-    }))
+    tx.send(RuntimeEvent::Observation(
+        dexitac_rig::event::SensorReport {
+            sensor: 1,
+            t_ms: 7,
+            centre_mm: None,
+            markers: Arc::new(vec![dexitac_tactile::PointPx::new(1.234_567, 2.0)]),
+            pipeline_ms: 3.0,
+            contact: None,
+            frame: Some(Arc::new(pressed[0].clone())),
+        },
+    ))
     .unwrap();
     drop(tx);
     let stats = thread.finish().unwrap();
@@ -342,7 +345,7 @@ fn spawned_recorder_writes_a_channel_of_events() {
 
 #[test]
 fn paced_replay_waits_for_the_recorded_times() {
-    use crate::source::{Clock, FrameSource};
+    use dexitac_rig::source::{Clock, FrameSource};
     let (bytes, _, _) = record(1);
     let rec = read(&bytes).unwrap();
     // Frames at 100, 133, 166, 199 ms: paced, the last comes 99 ms of
@@ -423,7 +426,7 @@ fn check_schema(
 }
 
 /// Every `foxglove.*` message matches Foxglove's own JSON schema
-/// (`host/tests/data/foxglove/`, from `@foxglove/schemas` 2.1.0), so the
+/// (`sim/tests/data/foxglove/`, from `@foxglove/schemas` 2.1.0), so the
 /// Foxglove app shows frames and annotations without setup.
 #[test]
 fn foxglove_messages_have_the_fields_foxglove_requires() {
