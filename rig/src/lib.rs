@@ -7,6 +7,8 @@
 //! - [`link`]: the serial link to the board (framing, acks, heartbeat);
 //! - [`task_loop`]: the paper's processes (one thread per sensor, one link
 //!   thread) with Algorithm 1 in between;
+//! - [`sensor_loop`]: the sensors without a board (record, view), and the
+//!   event tee;
 //! - [`camera`]: V4L2 tactile cameras; [`sources`]: frame folders;
 //! - [`recording`]: MCAP recording, reading and replay.
 #![warn(missing_docs)]
@@ -15,6 +17,7 @@ pub mod camera;
 pub mod event;
 pub mod link;
 pub mod recording;
+pub mod sensor_loop;
 pub mod source;
 pub mod sources;
 pub mod task_loop;

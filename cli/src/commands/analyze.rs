@@ -1,9 +1,9 @@
 //! `dexitac analyze`: image files -> contact centres CSV.
 
+use anyhow::anyhow;
 use std::fs::File;
-use std::io::{BufWriter, IsTerminal, Write};
+use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use dexitac_tactile::calibrate;
 use dexitac_tactile::displacement::ShiftTracker;
@@ -12,7 +12,29 @@ use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::PointPx;
 
-use crate::AnalyzeArgs;
+use crate::exit::Outcome;
+use crate::shared::progress;
+use crate::shared::sources::load_sensor_config;
+
+/// Arguments of `dexitac analyze`.
+#[derive(Debug, clap::Args)]
+pub struct AnalyzeArgs {
+    /// Rest (no-contact) frame; repeat for several.
+    #[arg(long, required = true, value_name = "REST.png")]
+    rest: Vec<PathBuf>,
+    /// Sensor config (TOML); defaults to the paper's parameters.
+    #[arg(long, value_name = "SENSOR.toml")]
+    config: Option<PathBuf>,
+    /// Output CSV, one row per frame.
+    #[arg(long, value_name = "PRED.csv")]
+    out: PathBuf,
+    /// Write the detected markers of each frame to `DIR/<frame>.csv` (x,y).
+    #[arg(long, value_name = "DIR")]
+    markers_out: Option<PathBuf>,
+    /// Frames (PNG or JPEG files, or directories of them).
+    #[arg(required = true, value_name = "FRAME")]
+    frames: Vec<PathBuf>,
+}
 
 /// CSV header (the first eight columns are the interface; more may follow).
 const HEADER: &str =
@@ -37,33 +59,27 @@ impl Decoded {
     }
 }
 
-/// Runs the subcommand; errors are printed, not returned.
-pub fn run(args: &AnalyzeArgs) -> ExitCode {
-    match run_inner(args) {
-        Ok(0) => ExitCode::SUCCESS,
-        Ok(failed) => {
-            eprintln!("dexitac analyze: {failed} frame(s) could not be analysed (see above)");
-            ExitCode::from(1)
+impl AnalyzeArgs {
+    /// Runs `dexitac analyze`: [`Outcome::Negative`] when some frames could
+    /// not be analysed (each is reported, the others are in the CSV).
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        let failed = run_inner(self)?;
+        if failed > 0 {
+            tracing::error!("dexitac analyze: {failed} frame(s) could not be analysed (see above)");
         }
-        Err(msg) => {
-            eprintln!("dexitac analyze: error: {msg}");
-            ExitCode::from(2)
-        }
+        Ok(Outcome::from_ok(failed == 0))
     }
 }
 
-fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
-    let params = match &args.config {
-        Some(path) => Params::load(path).map_err(|e| e.to_string())?,
-        None => Params::default(),
-    };
+fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
+    let params = load_sensor_config(args.config.as_deref())?;
     let mut rest_prepared = Vec::new();
     let mut rest_size = None;
     for path in &args.rest {
-        let d = decode(path).map_err(|e| format!("rest frame {}: {e}", path.display()))?;
+        let d = decode(path).map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
         if let Some((w, h)) = rest_size {
             if (w, h) != (d.width, d.height) {
-                return Err(format!(
+                return Err(anyhow!(
                     "rest frame {}: size {}x{} differs from {w}x{h}",
                     path.display(),
                     d.width,
@@ -73,37 +89,47 @@ fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
         }
         rest_size = Some((d.width, d.height));
         let p = frame::prepare(&d.raw(), &params.frame)
-            .map_err(|e| format!("rest frame {}: {e}", path.display()))?;
+            .map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
         rest_prepared.push(p.grey);
     }
-    let (rest_w, rest_h) = rest_size.ok_or("no rest frame")?;
-    let cal = calibrate::calibrate(&rest_prepared, &params).map_err(|e| e.to_string())?;
+    let (rest_w, rest_h) = rest_size.ok_or_else(|| anyhow!("no rest frame"))?;
+    let cal = calibrate::calibrate(&rest_prepared, &params).map_err(|e| anyhow!("{e}"))?;
     let pipeline = Pipeline::new(cal, params.clone());
 
     let (files, mut failed) = expand(&args.frames);
     if let Some(dir) = &args.markers_out {
         std::fs::create_dir_all(dir)
-            .map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+            .map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))?;
     }
     let out = File::create(&args.out)
-        .map_err(|e| format!("cannot create {}: {e}", args.out.display()))?;
-    let mut out = BufWriter::new(out);
-    let io_err = |e: std::io::Error| format!("writing {}: {e}", args.out.display());
-    writeln!(out, "{HEADER}").map_err(io_err)?;
-    let mut progress = Progress::new(files.len());
+        .map_err(|e| anyhow!("cannot create {}: {e}", args.out.display()))?;
+    let mut out = csv::Writer::from_writer(BufWriter::new(out));
+    let io_err = |e: csv::Error| anyhow!("writing {}: {e}", args.out.display());
+    out.write_record(HEADER.split(',')).map_err(io_err)?;
+    let labels = frame_labels(&files);
+    let bar = progress::bar(files.len() as u64, "frames");
+    let mut contacts = 0usize;
+    let mut times_ms = Vec::with_capacity(files.len());
     // Centre shifts in the order the frames are given; the anchor is the
     // first contact centre.
     let mut shifts = ShiftTracker::new(params.frame.mm_per_px);
-    for (n, path) in files.iter().enumerate() {
-        progress.show(n);
+    for (path, label) in files.iter().zip(&labels) {
+        bar.inc(1);
         match analyze_one(
             path,
+            label,
             &pipeline,
             &params,
             (rest_w, rest_h),
             args.markers_out.as_deref(),
         ) {
-            Ok((row, centre)) => {
+            Ok(Row {
+                mut fields,
+                centre,
+                total_ms,
+            }) => {
+                contacts += usize::from(centre.is_some());
+                times_ms.push(total_ms);
                 let shift = shifts.update(centre);
                 if centre.is_some() && shift.from_anchor_mm.is_none() {
                     shifts.hold_anchor();
@@ -113,58 +139,74 @@ fn run_inner(args: &AnalyzeArgs) -> Result<usize, String> {
                     (_, d) => d,
                 };
                 let mm = |v: Option<f64>| v.map_or("NaN".to_string(), |v| format!("{v:.4}"));
-                writeln!(
-                    out,
-                    "{row},{},{}",
-                    mm(shift.frame_to_frame_mm),
-                    mm(from_anchor)
-                )
-                .map_err(io_err)?
+                fields.push(mm(shift.frame_to_frame_mm));
+                fields.push(mm(from_anchor));
+                out.write_record(&fields).map_err(io_err)?
             }
             Err(msg) => {
-                progress.clear();
-                eprintln!("dexitac analyze: {}: {msg}", path.display());
+                tracing::error!("dexitac analyze: {}: {msg}", path.display());
                 failed += 1;
             }
         }
     }
-    progress.finish();
-    out.flush().map_err(io_err)?;
+    bar.finish_and_clear();
+    out.flush()
+        .map_err(|e| anyhow!("writing {}: {e}", args.out.display()))?;
+    times_ms.sort_by(f64::total_cmp);
+    let median_ms = times_ms.get(times_ms.len() / 2).copied();
+    tracing::info!(
+        "dexitac analyze: {} frame(s) analysed, {contacts} with a contact, {failed} failed, median {} per frame; wrote {}",
+        times_ms.len(),
+        median_ms.map_or("-".to_string(), |t| format!("{t:.2} ms")),
+        args.out.display()
+    );
     Ok(failed)
 }
 
-/// One frame -> one CSV row (without the shift columns) and the contact
-/// centre in working px.
+/// One analysed frame.
+struct Row {
+    /// The CSV fields before the shift columns.
+    fields: Vec<String>,
+    /// The contact centre, working px.
+    centre: Option<PointPx>,
+    /// Preparation and pipeline time, ms.
+    total_ms: f64,
+}
+
+/// One frame -> one CSV row (without the shift columns).
 fn analyze_one(
     path: &Path,
+    label: &str,
     pipeline: &Pipeline,
     params: &Params,
     rest_size: (usize, usize),
     markers_out: Option<&Path>,
-) -> Result<(String, Option<PointPx>), String> {
+) -> anyhow::Result<Row> {
     let d = decode(path)?;
     if (d.width, d.height) != rest_size {
-        return Err(format!(
+        return Err(anyhow!(
             "wrong size {}x{}: the rest frame is {}x{}",
-            d.width, d.height, rest_size.0, rest_size.1
+            d.width,
+            d.height,
+            rest_size.0,
+            rest_size.1
         ));
     }
     let t0 = std::time::Instant::now();
-    let prepared = frame::prepare(&d.raw(), &params.frame).map_err(|e| e.to_string())?;
+    let prepared = frame::prepare(&d.raw(), &params.frame).map_err(|e| anyhow!("{e}"))?;
     // Frame preparation (grey, crop, rescale) counts as part of detection.
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let r = pipeline.run(&prepared.grey).map_err(|e| e.to_string())?;
-    let stem = stem_of(path);
+    let r = pipeline.run(&prepared.grey).map_err(|e| anyhow!("{e}"))?;
     if let Some(dir) = markers_out {
         write_markers(
-            &dir.join(format!("{stem}.csv")),
+            &dir.join(format!("{}.csv", label.replace('/', "__"))),
             &prepared,
             &r.markers.positions(),
         )?;
     }
     if r.markers.is_empty() {
-        eprintln!(
-            "dexitac analyze: {}: warning: no markers found (blank frame?)",
+        tracing::warn!(
+            "dexitac analyze: {}: no markers found (blank frame?)",
             path.display()
         );
     }
@@ -181,17 +223,24 @@ fn analyze_one(
         }
         None => ("NaN".into(), "NaN".into(), "0".into(), "none"),
     };
-    let row = format!(
-        "{},{cx},{cy},{},{:.4},{:.4},{:.4},{:.4},{area},{source},{}",
-        csv_field(&stem),
-        r.markers.len(),
-        prepare_ms + t.detect_ms,
-        t.kde_ms,
-        t.segment_ms,
-        prepare_ms + t.total_ms,
-        r.skipped
-    );
-    Ok((row, r.contact.map(|c| c.centre)))
+    let fields = vec![
+        label.to_string(),
+        cx,
+        cy,
+        r.markers.len().to_string(),
+        format!("{:.4}", prepare_ms + t.detect_ms),
+        format!("{:.4}", t.kde_ms),
+        format!("{:.4}", t.segment_ms),
+        format!("{:.4}", prepare_ms + t.total_ms),
+        area,
+        source.to_string(),
+        r.skipped.to_string(),
+    ];
+    Ok(Row {
+        fields,
+        centre: r.contact.map(|c| c.centre),
+        total_ms: prepare_ms + t.total_ms,
+    })
 }
 
 fn fmt(v: f64) -> String {
@@ -202,22 +251,72 @@ fn fmt(v: f64) -> String {
     }
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
+/// A label per frame for the CSV and the marker files: the file stem, with
+/// as many parent folders in front (`run2/frame_001`) as it takes to tell
+/// apart frames of the same name from different folders.
+fn frame_labels(files: &[PathBuf]) -> Vec<String> {
+    let parts: Vec<Vec<String>> = files
+        .iter()
+        .map(|p| {
+            let stem = p.file_stem().map_or_else(
+                || p.display().to_string(),
+                |s| s.to_string_lossy().into_owned(),
+            );
+            let parents = p
+                .parent()
+                .into_iter()
+                .flat_map(|d| d.components().rev())
+                .map(|c| c.as_os_str().to_string_lossy().into_owned());
+            std::iter::once(stem).chain(parents).collect()
+        })
+        .collect();
+    let label = |k: usize, depth: usize| {
+        let p = &parts[k];
+        let mut v: Vec<&str> = p
+            .iter()
+            .take(depth.min(p.len()))
+            .map(String::as_str)
+            .collect();
+        v.reverse();
+        v.join("/")
+    };
+    let mut depth = vec![1; files.len()];
+    let max_depth = parts.iter().map(Vec::len).max().unwrap_or(1);
+    for _ in 0..max_depth {
+        let labels: Vec<String> = (0..files.len()).map(|k| label(k, depth[k])).collect();
+        let mut changed = false;
+        for k in 0..files.len() {
+            let clash = labels
+                .iter()
+                .enumerate()
+                .any(|(j, l)| *l == labels[k] && files[j] != files[k]);
+            if clash && depth[k] < parts[k].len() {
+                depth[k] += 1;
+                changed = true;
+            }
+        }
+        if !changed {
+            break;
+        }
     }
+    // The same path given twice: number the repeats.
+    let mut seen = std::collections::HashMap::<String, usize>::new();
+    (0..files.len())
+        .map(|k| {
+            let l = label(k, depth[k]);
+            let n = seen.entry(l.clone()).or_insert(0);
+            *n += 1;
+            if *n == 1 {
+                l
+            } else {
+                format!("{l}#{n}")
+            }
+        })
+        .collect()
 }
 
-fn stem_of(path: &Path) -> String {
-    path.file_stem()
-        .map(|s| s.to_string_lossy().into_owned())
-        .unwrap_or_else(|| path.display().to_string())
-}
-
-fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> Result<(), String> {
-    let err = |e: std::io::Error| format!("cannot write {}: {e}", path.display());
+fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> anyhow::Result<()> {
+    let err = |e: std::io::Error| anyhow!("cannot write {}: {e}", path.display());
     let mut f = BufWriter::new(File::create(path).map_err(err)?);
     writeln!(f, "x,y").map_err(err)?;
     for m in markers {
@@ -228,17 +327,17 @@ fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> Resul
 }
 
 /// Decodes a PNG/JPEG into 8-bit grey, RGB or RGBA.
-fn decode(path: &Path) -> Result<Decoded, String> {
+fn decode(path: &Path) -> anyhow::Result<Decoded> {
     let reader = image::ImageReader::open(path)
-        .map_err(|e| format!("cannot open: {e}"))?
+        .map_err(|e| anyhow!("cannot open: {e}"))?
         .with_guessed_format()
-        .map_err(|e| format!("cannot read: {e}"))?;
+        .map_err(|e| anyhow!("cannot read: {e}"))?;
     let img = reader
         .decode()
-        .map_err(|e| format!("cannot decode image: {e}"))?;
+        .map_err(|e| anyhow!("cannot decode image: {e}"))?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     if width == 0 || height == 0 {
-        return Err(format!("empty image ({width}x{height})"));
+        return Err(anyhow!("empty image ({width}x{height})"));
     }
     let (channels, data) = match img {
         image::DynamicImage::ImageLuma8(b) => (1, b.into_raw()),
@@ -271,7 +370,7 @@ fn expand(args: &[PathBuf]) -> (Vec<PathBuf>, usize) {
                     files.extend(found);
                 }
                 Err(e) => {
-                    eprintln!(
+                    tracing::info!(
                         "dexitac analyze: {}: cannot list directory: {e}",
                         a.display()
                     );
@@ -291,44 +390,16 @@ fn is_image_name(p: &Path) -> bool {
         .is_some_and(|e| matches!(e.to_ascii_lowercase().as_str(), "png" | "jpg" | "jpeg"))
 }
 
-/// A one-line progress bar on stderr (only when stderr is a terminal and
-/// there is more than one frame).
-struct Progress {
-    total: usize,
-    enabled: bool,
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-impl Progress {
-    fn new(total: usize) -> Self {
-        Self {
-            total,
-            enabled: total > 1 && std::io::stderr().is_terminal(),
-        }
-    }
-
-    fn show(&mut self, done: usize) {
-        if !self.enabled || (done % 16 != 0 && done + 1 != self.total) {
-            return;
-        }
-        let width = 30;
-        let filled = done * width / self.total.max(1);
-        eprint!(
-            "\r[{}{}] {done}/{}",
-            "#".repeat(filled),
-            ".".repeat(width - filled),
-            self.total
-        );
-    }
-
-    fn clear(&self) {
-        if self.enabled {
-            eprint!("\r{}\r", " ".repeat(50));
-        }
-    }
-
-    fn finish(&self) {
-        if self.enabled {
-            eprintln!("\r[{}] {}/{}", "#".repeat(30), self.total, self.total);
-        }
+    #[test]
+    fn frames_of_the_same_name_get_distinct_labels() {
+        let files: Vec<PathBuf> = ["a/run1/f0.png", "a/run2/f0.png", "b/f1.png", "b/f1.png"]
+            .iter()
+            .map(PathBuf::from)
+            .collect();
+        assert_eq!(frame_labels(&files), ["run1/f0", "run2/f0", "f1", "f1#2"]);
     }
 }

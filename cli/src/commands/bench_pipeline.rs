@@ -1,13 +1,31 @@
 //! `dexitac bench-pipeline`: accuracy against run time (see `dexitac_tactile::bench`).
 
+use anyhow::anyhow;
 use std::fmt::Write as _;
-use std::process::ExitCode;
+use std::path::PathBuf;
 
 use dexitac_tactile::bench::{self, Pooled, Summary};
 use dexitac_tactile::params::DensityMode;
 use dexitac_tactile::synth::Category;
 
-use crate::BenchArgs;
+use crate::exit::Outcome;
+
+/// Arguments of `dexitac bench-pipeline`.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Frames per scene category for the fast settings.
+    #[arg(long, default_value_t = 40)]
+    frames: usize,
+    /// Frames per scene category for the exact (f64, every pixel) settings.
+    #[arg(long, default_value_t = 6)]
+    exact_frames: usize,
+    /// Seed of the synthetic scenes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Directory for results.md and pareto.png.
+    #[arg(long, default_value = "bench-out")]
+    out_dir: PathBuf,
+}
 
 /// Plot colours, one per setting in `bench::settings()` order.
 const COLOURS: [([u8; 3], &str); 9] = [
@@ -22,20 +40,17 @@ const COLOURS: [([u8; 3], &str); 9] = [
     ([0, 0, 0], "black"),
 ];
 
-/// Runs the subcommand.
-pub fn run(args: &BenchArgs) -> ExitCode {
-    match run_inner(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(msg) => {
-            eprintln!("dexitac bench-pipeline: error: {msg}");
-            ExitCode::from(2)
-        }
+impl BenchArgs {
+    /// Runs the command.
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        run_inner(self)?;
+        Ok(Outcome::Success)
     }
 }
 
-fn run_inner(args: &BenchArgs) -> Result<(), String> {
+fn run_inner(args: &BenchArgs) -> anyhow::Result<()> {
     std::fs::create_dir_all(&args.out_dir)
-        .map_err(|e| format!("cannot create {}: {e}", args.out_dir.display()))?;
+        .map_err(|e| anyhow!("cannot create {}: {e}", args.out_dir.display()))?;
     let mut details = String::new();
     let mut pooled: Vec<Pooled> = Vec::new();
     for setting in bench::settings() {
@@ -45,12 +60,12 @@ fn run_inner(args: &BenchArgs) -> Result<(), String> {
         } else {
             args.frames
         };
-        eprintln!(
+        tracing::info!(
             "bench-pipeline: {} ({frames} frames per scene)",
             setting.name
         );
         let samples = bench::evaluate(&setting, &Category::ALL, frames, 640, 480, args.seed)
-            .map_err(|e| e.to_string())?;
+            .map_err(|e| anyhow!("{e}"))?;
         let sums: Vec<Summary> = Category::ALL
             .iter()
             .map(|&c| bench::summarize(c, &samples))
@@ -76,9 +91,9 @@ fn run_inner(args: &BenchArgs) -> Result<(), String> {
     );
     let _ = writeln!(report, "|---|---|---|---|---|---|");
     for (w, h) in [(320, 240), (640, 480), (1280, 960)] {
-        eprintln!("bench-pipeline: timing {w}x{h}");
+        tracing::info!("bench-pipeline: timing {w}x{h}");
         let (c, n) =
-            bench::time_at_size(w, h, args.frames, args.seed).map_err(|e| e.to_string())?;
+            bench::time_at_size(w, h, args.frames, args.seed).map_err(|e| anyhow!("{e}"))?;
         let _ = writeln!(
             report,
             "| {w}x{h} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} |",
@@ -103,9 +118,9 @@ fn run_inner(args: &BenchArgs) -> Result<(), String> {
     let plot = dexitac_view::figures::pareto::pareto_plot(&pooled, &colours);
     let png = args.out_dir.join("pareto.png");
     plot.save(&png)
-        .map_err(|e| format!("cannot write {}: {e}", png.display()))?;
+        .map_err(|e| anyhow!("cannot write {}: {e}", png.display()))?;
     std::fs::write(args.out_dir.join("results.md"), &report)
-        .map_err(|e| format!("cannot write results.md: {e}"))?;
-    eprintln!("bench-pipeline: wrote {} and results.md", png.display());
+        .map_err(|e| anyhow!("cannot write results.md: {e}"))?;
+    tracing::info!("bench-pipeline: wrote {} and results.md", png.display());
     Ok(())
 }

@@ -28,8 +28,8 @@
 //! edge_x_mm = 9.0
 //! ```
 
+use anyhow::anyhow;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::atomic::AtomicBool;
 use std::sync::mpsc;
 use std::sync::Arc;
@@ -42,9 +42,12 @@ use dexitac_rig::event::RuntimeEvent;
 use dexitac_rig::link::{Link, LinkConfig};
 use dexitac_rig::source::Clock;
 use dexitac_rig::task_loop::ControlConfig;
-use dexitac_tactile::params::Params;
 
-use crate::commands::sources::{self, SourceArgs};
+use crate::exit::Outcome;
+use crate::shared::live::{calibrated_dashboard, with_live_view, LiveArgs};
+use crate::shared::record::{finish_recorder, start_recorder, RecordFlags};
+use crate::shared::sources::{self, load_sensor_config, SourceArgs};
+use crate::shared::stop_on_ctrl_c;
 
 /// Arguments of `dexitac run`.
 #[derive(Debug, clap::Args)]
@@ -58,10 +61,10 @@ pub struct RunArgs {
     #[command(flatten)]
     sources: SourceArgs,
     #[command(flatten)]
-    record: crate::commands::record::RecordFlags,
+    record: RecordFlags,
     /// Live view: window and PNG snapshots.
     #[command(flatten)]
-    live: crate::commands::view::LiveArgs,
+    live: LiveArgs,
 }
 
 #[derive(Debug, Deserialize)]
@@ -119,14 +122,14 @@ impl Default for GripperConfig {
 }
 
 impl GripperConfig {
-    fn load(path: &Path) -> Result<Self, String> {
+    fn load(path: &Path) -> anyhow::Result<Self> {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+            .map_err(|e| anyhow!("cannot read {}: {e}", path.display()))?;
         let config: GripperConfig =
-            toml::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+            toml::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
         if let Some(task) = &config.task {
             task.validate().map_err(|(field, value, reason)| {
-                format!("{}: {field} = {value}: {reason}", path.display())
+                anyhow!("{}: {field} = {value}: {reason}", path.display())
             })?;
         }
         let g = &config.grasp;
@@ -134,7 +137,7 @@ impl GripperConfig {
         if !(finite_pos(g.stable_shift_mm) && finite_pos(g.slip_shift_mm))
             || g.slip_shift_mm <= g.stable_shift_mm
         {
-            return Err(format!(
+            return Err(anyhow!(
                 "{}: grasp thresholds must be positive with slip_shift_mm > stable_shift_mm",
                 path.display()
             ));
@@ -142,13 +145,13 @@ impl GripperConfig {
         if config.grasp_chambers.is_empty()
             || config.grasp_chambers.iter().any(|&c| c >= CHAMBER_COUNT)
         {
-            return Err(format!(
+            return Err(anyhow!(
                 "{}: grasp_chambers must name chambers 0..{CHAMBER_COUNT}",
                 path.display()
             ));
         }
         if !config.open_loop_close_s.is_finite() || config.open_loop_close_s < 0.0 {
-            return Err(format!(
+            return Err(anyhow!(
                 "{}: open_loop_close_s must be >= 0",
                 path.display()
             ));
@@ -156,12 +159,12 @@ impl GripperConfig {
         Ok(config)
     }
 
-    fn control(&self) -> Result<ControlConfig, String> {
+    fn control(&self) -> anyhow::Result<ControlConfig> {
         let kpa_to_pa = |v: f64| {
             if v.is_finite() && v.abs() < 1e3 {
                 Ok((v * 1e3).round() as i32)
             } else {
-                Err(format!("tank pressure {v} kPa is not usable"))
+                Err(anyhow!("tank pressure {v} kPa is not usable"))
             }
         };
         Ok(ControlConfig {
@@ -184,18 +187,15 @@ impl GripperConfig {
     }
 }
 
-fn run_inner(args: &RunArgs) -> Result<(), String> {
+fn run_inner(args: &RunArgs) -> anyhow::Result<()> {
     let config = GripperConfig::load(&args.config)?;
-    let params = match &config.sensor_config {
-        Some(path) => Params::load(path).map_err(|e| e.to_string())?,
-        None => Params::default(),
-    };
+    let params = load_sensor_config(config.sensor_config.as_deref())?;
     let control = ControlConfig {
         share_frames: args.record.record_frames || args.live.wanted(),
         ..config.control()?
     };
     let stop = Arc::new(AtomicBool::new(false));
-    crate::commands::sim::stop_on_ctrl_c(&stop);
+    stop_on_ctrl_c(&stop);
     let mut cameras = Vec::new();
     let setups = sources::open(&args.sources, &params, 2..=2, &stop, &mut cameras)?;
     let (sensors, rests) = sources::calibrated(setups, &params)?;
@@ -203,8 +203,8 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         baud: config.baud,
         ..LinkConfig::default()
     };
-    let mut link = Link::open(&args.port, link_config).map_err(|e| e.to_string())?;
-    let recorder = crate::commands::record::start_recorder(
+    let mut link = Link::open(&args.port, link_config).map_err(|e| anyhow!("{e}"))?;
+    let recorder = start_recorder(
         &args.record,
         "run",
         &format!("dexitac run --port {}", args.port.display()),
@@ -212,7 +212,7 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         config.sensor_config.as_deref(),
         &params,
     )?;
-    let dashboard = crate::commands::view::calibrated_dashboard("RUN", &params, &sensors);
+    let dashboard = calibrated_dashboard("RUN", &params, &sensors);
     let tap = recorder.as_ref().map(|r| r.sender());
     let work = |view: Option<mpsc::Sender<RuntimeEvent>>| {
         let (tx, rx) = mpsc::channel::<RuntimeEvent>();
@@ -221,14 +221,13 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
             dexitac_rig::task_loop::run(&control, &mut link, sensors, Clock::wall(), &stop, &tx);
         drop(tx);
         if printer.join().is_err() {
-            eprintln!("dexitac run: the event printer failed");
+            tracing::error!("dexitac run: the event printer failed");
         }
         result
     };
-    let (result, linger) =
-        crate::commands::view::with_live_view(&args.live, "run", dashboard, &stop, work)?;
+    let (result, linger) = with_live_view(&args.live, "run", dashboard, &stop, work)?;
     if linger.closed_by_user {
-        eprintln!(
+        tracing::info!(
             "dexitac run: the live view was closed, the run stopped{}",
             if result.is_ok() {
                 ": valves sealed, MCU disarmed"
@@ -238,9 +237,9 @@ fn run_inner(args: &RunArgs) -> Result<(), String> {
         );
     }
     sources::print_camera_stats("run", &cameras);
-    let recorded = crate::commands::record::finish_recorder(recorder, &args.record);
+    let recorded = finish_recorder(recorder, &args.record);
     linger.wait();
-    result.map_err(|e| e.to_string())?;
+    result.map_err(|e| anyhow!("{e}"))?;
     recorded
 }
 
@@ -264,17 +263,17 @@ fn print_events(
             RuntimeEvent::CommandSent {
                 t_ms, msg, reason, ..
             } => {
-                eprintln!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
+                tracing::info!("{:9.3} s  {reason}: {msg:?}", t_ms as f64 / 1e3);
             }
             RuntimeEvent::Task { t_ms, event } => {
-                eprintln!("{:9.3} s  task: {event:?}", t_ms as f64 / 1e3);
+                tracing::info!("{:9.3} s  task: {event:?}", t_ms as f64 / 1e3);
             }
             RuntimeEvent::Stopped {
                 t_ms,
                 outcome,
                 max_loop_gap,
             } => {
-                eprintln!(
+                tracing::info!(
                     "{:9.3} s  stopped: {outcome:?} (longest loop stall {:.1} ms)",
                     t_ms as f64 / 1e3,
                     max_loop_gap.as_secs_f64() * 1e3
@@ -285,13 +284,10 @@ fn print_events(
     }
 }
 
-/// Runs the subcommand.
-pub fn run(args: &RunArgs) -> ExitCode {
-    match run_inner(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(msg) => {
-            eprintln!("dexitac run: {msg}");
-            ExitCode::from(2)
-        }
+impl RunArgs {
+    /// Runs `dexitac run`.
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        run_inner(self)?;
+        Ok(Outcome::Success)
     }
 }

@@ -1,8 +1,5 @@
-//! `dexitac cameras` and `dexitac sensor tune | health`.
+//! `dexitac sensor tune | health`: set up a fingertip's skin.
 //!
-//! - `cameras`: lists the V4L2 video capture devices (`/dev/video*`) with
-//!   name, bus, formats and frame sizes. Exit 0 when it found one, 1 when
-//!   there is none ("no capture devices found") or on a non-Linux system.
 //! - `sensor tune --rest REST.png --pins N [--config SENSOR.toml] [--out
 //!   OUT.toml]`: tunes the marker detector so the rest frame shows the
 //!   skin's N pins ([`dexitac_tactile::sensor_setup::tune`]); writes the sensor
@@ -14,8 +11,10 @@
 //!   against the rest frame ([`dexitac_tactile::sensor_setup::health`]). Exit 0
 //!   pass, 1 warn, 2 fail, 3 when the check could not run (bad input).
 
+use crate::exit::Outcome;
+use crate::shared::sources::load_sensor_config;
+use anyhow::anyhow;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use dexitac_rig::sources;
 use dexitac_tactile::frame::GreyFrame;
@@ -76,34 +75,34 @@ pub struct HealthArgs {
     frames: Vec<PathBuf>,
 }
 
-fn load_params(config: Option<&Path>) -> Result<Params, String> {
-    match config {
-        Some(path) => Params::load(path).map_err(|e| e.to_string()),
-        None => Ok(Params::default()),
-    }
+fn load(path: &Path, params: &Params) -> anyhow::Result<GreyFrame> {
+    sources::load_frame(path, &params.frame).map_err(|e| anyhow!("{e}"))
 }
 
-fn load(path: &Path, params: &Params) -> Result<GreyFrame, String> {
-    sources::load_frame(path, &params.frame).map_err(|e| e.to_string())
-}
-
-/// Runs `dexitac sensor tune`.
-pub fn tune(args: &TuneArgs) -> ExitCode {
-    match tune_inner(args) {
-        Ok(true) => ExitCode::SUCCESS,
-        Ok(false) => ExitCode::from(1),
-        Err(msg) => {
-            eprintln!("dexitac sensor tune: {msg}");
-            ExitCode::from(2)
+impl SensorCommand {
+    /// Runs `dexitac sensor tune` ([`Outcome::Negative`]: no exact pin
+    /// count) or `dexitac sensor health` (pass, warn or fail).
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        match self {
+            SensorCommand::Tune(args) => Ok(Outcome::from_ok(tune_inner(args)?)),
+            SensorCommand::Health(args) => {
+                let report = health_inner(args)?;
+                print_report(&report);
+                Ok(match report.verdict {
+                    Verdict::Pass => Outcome::Success,
+                    Verdict::Warn => Outcome::Negative,
+                    Verdict::Fail => Outcome::HealthFail,
+                })
+            }
         }
     }
 }
 
-fn tune_inner(args: &TuneArgs) -> Result<bool, String> {
-    let base = load_params(args.config.as_deref())?;
+fn tune_inner(args: &TuneArgs) -> anyhow::Result<bool> {
+    let base = load_sensor_config(args.config.as_deref())?;
     let rest = load(&args.rest, &base)?;
     let before = sensor_setup::count_markers(&rest, &base.markers);
-    let r = sensor_setup::tune(&rest, args.pins, &base).map_err(|e| e.to_string())?;
+    let r = sensor_setup::tune(&rest, args.pins, &base).map_err(|e| anyhow!("{e}"))?;
     let tuned = Params {
         markers: r.markers.clone(),
         ..base
@@ -127,15 +126,15 @@ fn tune_inner(args: &TuneArgs) -> Result<bool, String> {
         &format!("Sensor config tuned by `dexitac sensor tune`.\n{summary}"),
     );
     // The written file must load back as the tuned parameters.
-    Params::from_toml_str(&text).map_err(|e| format!("internal: tuned config invalid: {e}"))?;
+    Params::from_toml_str(&text).map_err(|e| anyhow!("internal: tuned config invalid: {e}"))?;
     match &args.out {
         Some(path) => std::fs::write(path, &text)
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?,
+            .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?,
         None => print!("{text}"),
     }
-    eprintln!("dexitac sensor tune: {summary}");
+    tracing::info!("dexitac sensor tune: {summary}");
     if !r.exact {
-        eprintln!(
+        tracing::info!(
             "dexitac sensor tune: no setting finds exactly {} markers; the closest was written \
              (check the rest frame: nothing touching, in focus, evenly lit)",
             r.pins
@@ -144,31 +143,13 @@ fn tune_inner(args: &TuneArgs) -> Result<bool, String> {
     Ok(r.exact)
 }
 
-/// Runs `dexitac sensor health`.
-pub fn health(args: &HealthArgs) -> ExitCode {
-    match health_inner(args) {
-        Ok(report) => {
-            print_report(&report);
-            ExitCode::from(match report.verdict {
-                Verdict::Pass => 0,
-                Verdict::Warn => 1,
-                Verdict::Fail => 2,
-            })
-        }
-        Err(msg) => {
-            eprintln!("dexitac sensor health: {msg}");
-            ExitCode::from(3)
-        }
-    }
-}
-
-fn health_inner(args: &HealthArgs) -> Result<HealthReport, String> {
-    let params = load_params(args.config.as_deref())?;
+fn health_inner(args: &HealthArgs) -> anyhow::Result<HealthReport> {
+    let params = load_sensor_config(args.config.as_deref())?;
     let rest = load(&args.rest, &params)?;
     let mut frames = Vec::new();
     for path in &args.frames {
         if path.is_dir() {
-            for f in sources::image_files(path).map_err(|e| e.to_string())? {
+            for f in sources::image_files(path).map_err(|e| anyhow!("{e}"))? {
                 frames.push(load(&f, &params)?);
             }
         } else {
@@ -179,14 +160,16 @@ fn health_inner(args: &HealthArgs) -> Result<HealthReport, String> {
         && args.max_jitter_px.is_finite()
         && args.max_jitter_px >= 0.0;
     if !limits_ok {
-        return Err("--min-coverage-pct must lie in 0..=100, --max-jitter-px >= 0".into());
+        return Err(anyhow!(
+            "--min-coverage-pct must lie in 0..=100, --max-jitter-px >= 0"
+        ));
     }
     let limits = HealthLimits {
         min_coverage: args.min_coverage_pct / 100.0,
         max_jitter_px: args.max_jitter_px,
         ..HealthLimits::default()
     };
-    sensor_setup::health(&rest, &frames, &params, &limits, args.pins).map_err(|e| e.to_string())
+    sensor_setup::health(&rest, &frames, &params, &limits, args.pins).map_err(|e| anyhow!("{e}"))
 }
 
 fn positions(list: &[PointPx]) -> String {
@@ -232,35 +215,5 @@ fn print_report(r: &HealthReport) {
     println!("{}", r.verdict);
     for reason in &r.reasons {
         println!("  - {reason}");
-    }
-}
-
-/// Runs `dexitac cameras`.
-pub fn cameras() -> ExitCode {
-    #[cfg(target_os = "linux")]
-    {
-        let list = dexitac_rig::camera::v4l2::list_cameras();
-        if list.is_empty() {
-            eprintln!(
-                "dexitac cameras: no capture devices found (no /dev/video* video capture node; \
-                 is the fingertip plugged in, and may you read /dev/video*?)"
-            );
-            return ExitCode::from(1);
-        }
-        for cam in list {
-            println!("{}: {} ({})", cam.path.display(), cam.name, cam.bus);
-            for (format, sizes) in &cam.formats {
-                println!("    {format}: {}", sizes.join(" "));
-            }
-        }
-        ExitCode::SUCCESS
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        eprintln!(
-            "dexitac cameras: {}",
-            dexitac_rig::camera::CameraError::Unsupported
-        );
-        ExitCode::from(1)
     }
 }

@@ -1,12 +1,20 @@
 //! `dexitac sim`: the whole system on the simulated rig (see
 //! `dexitac_sim::rig`), results to a directory (see `dexitac_sim::output`).
 
+use anyhow::anyhow;
 use std::path::PathBuf;
-use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
+use anyhow::Context;
 use dexitac_sim::output;
+use tracing::{error, info};
+
+use crate::exit::Outcome;
+use crate::shared::live::{run_sim, LiveArgs};
+use crate::shared::out_dir::{self, Owned};
+use crate::shared::record::{finish_recorder, start_recorder, RecordFlags};
+use crate::shared::stop_on_ctrl_c;
 use dexitac_sim::plant::FINGER_COUNT;
 use dexitac_sim::rig::{self, SimOptions};
 use dexitac_sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
@@ -40,31 +48,47 @@ pub struct SimArgs {
     #[arg(long)]
     list: bool,
     #[command(flatten)]
-    record: crate::commands::record::RecordFlags,
+    record: RecordFlags,
     /// Live view: window and PNG snapshots.
     #[command(flatten)]
-    live: crate::commands::view::LiveArgs,
+    live: LiveArgs,
 }
 
-fn parse_speed(s: &str) -> Result<f64, String> {
-    let v: f64 = s.parse().map_err(|e| format!("{e}"))?;
+fn parse_speed(s: &str) -> anyhow::Result<f64> {
+    let v: f64 = s.parse().map_err(|e| anyhow!("{e}"))?;
     if v.is_finite() && (0.1..=20.0).contains(&v) {
         Ok(v)
     } else {
-        Err("speed must lie in 0.1..=20".into())
+        Err(anyhow!("speed must lie in 0.1..=20"))
     }
 }
 
-/// Installs a Ctrl-C handler that sets `stop` (once per process).
-pub fn stop_on_ctrl_c(stop: &Arc<AtomicBool>) {
-    let flag = Arc::clone(stop);
-    if let Err(e) = ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)) {
-        eprintln!("dexitac: Ctrl-C handler not installed ({e}); stop with the scenario's end");
+/// The files `dexitac sim` writes into --out.
+pub const OWNED: [Owned; 7] = [
+    Owned::File("events.log"),
+    Owned::File("timeseries.csv"),
+    Owned::File("summary.json"),
+    Owned::File("plot.png"),
+    Owned::File("plot.svg"),
+    Owned::Pattern {
+        prefix: "heatmap_",
+        suffix: ".png",
+    },
+    Owned::Pattern {
+        prefix: "heatmap_",
+        suffix: ".svg",
+    },
+];
+
+impl SimArgs {
+    /// Runs `dexitac sim`: [`Outcome::Negative`] when the task loop failed
+    /// (a trip, the link); the results are written either way.
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        run(self)
     }
 }
 
-/// Runs the subcommand.
-pub fn run(args: &SimArgs) -> ExitCode {
+fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
     if args.list {
         for (name, text) in PRESETS {
             let description = Scenario::from_toml_str(text, name)
@@ -72,18 +96,13 @@ pub fn run(args: &SimArgs) -> ExitCode {
                 .unwrap_or_default();
             println!("{name:<12} {description}");
         }
-        return ExitCode::SUCCESS;
+        return Ok(Outcome::Success);
     }
-    let scenario = match Scenario::load(&args.scenario) {
-        Ok(s) => s,
-        Err(e) => {
-            eprintln!("dexitac sim: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    let scenario = Scenario::load(&args.scenario)?;
+    out_dir::prepare("sim", &args.out, &OWNED)?;
     let stop = Arc::new(AtomicBool::new(false));
     stop_on_ctrl_c(&stop);
-    eprintln!(
+    info!(
         "dexitac sim: scenario {} ({:.0} s simulated at {}x), tactile feedback {}",
         scenario.name,
         scenario.duration_s,
@@ -93,7 +112,7 @@ pub fn run(args: &SimArgs) -> ExitCode {
     let rests: Vec<_> = (0..FINGER_COUNT)
         .map(|finger| rig::rest_frames(finger, &Params::default(), args.seed))
         .collect();
-    let recorder = match crate::commands::record::start_recorder(
+    let recorder = start_recorder(
         &args.record,
         "sim",
         &format!(
@@ -103,13 +122,7 @@ pub fn run(args: &SimArgs) -> ExitCode {
         &rests,
         None,
         &Params::default(),
-    ) {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("dexitac sim: {e}");
-            return ExitCode::from(2);
-        }
-    };
+    )?;
     let options = SimOptions {
         event_tap: recorder.as_ref().map(|r| r.sender()),
         share_frames: args.record.record_frames,
@@ -122,25 +135,13 @@ pub fn run(args: &SimArgs) -> ExitCode {
         ..SimOptions::default()
     };
     // run_sim drops the options: they hold the last sender of the event tap.
-    let report = crate::commands::view::run_sim(&scenario, options, &args.live);
-    let recorded = crate::commands::record::finish_recorder(recorder, &args.record);
-    let (report, view) = match report {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("dexitac sim: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    if let Err(e) = recorded {
-        eprintln!("dexitac sim: {e}");
-        return ExitCode::from(2);
-    }
-    if let Err(e) = output::write_all(&report, &args.out)
+    let report = run_sim(&scenario, options, &args.live);
+    let recorded = finish_recorder(recorder, &args.record);
+    let (report, view) = report?;
+    recorded?;
+    output::write_all(&report, &args.out)
         .and_then(|()| dexitac_view::figures::sim_run::write_all(&report, &args.out))
-    {
-        eprintln!("dexitac sim: writing {}: {e}", args.out.display());
-        return ExitCode::from(2);
-    }
+        .with_context(|| format!("writing {}", args.out.display()))?;
     println!(
         "scenario {}: outcome {}, time to stable {}, {} poke(s), wrote {}",
         report.scenario,
@@ -187,12 +188,12 @@ pub fn run(args: &SimArgs) -> ExitCode {
     }
     view.wait();
     match &report.loop_result {
-        Ok(_) => ExitCode::SUCCESS,
+        Ok(_) => Ok(Outcome::Success),
         Err(e) => {
-            eprintln!("dexitac sim: the task loop failed: {e}");
+            error!("dexitac sim: the task loop failed: {e}");
             let stalled_ms = report.max_loop_gap.as_secs_f64() * 1e3;
             if stalled_ms >= f64::from(args.host_silence_ms) {
-                eprintln!(
+                error!(
                     "dexitac sim: the host's control loop stalled for {stalled_ms:.0} ms, longer than \
                      the board's {} ms host-silence deadline, so the firmware tripped as it would on \
                      the real rig. The machine was too busy: re-run when it is idle, or give the \
@@ -200,7 +201,7 @@ pub fn run(args: &SimArgs) -> ExitCode {
                     args.host_silence_ms
                 );
             }
-            ExitCode::from(1)
+            Ok(Outcome::Negative)
         }
     }
 }

@@ -1,9 +1,10 @@
 //! `dexitac synth-frames`: seeded synthetic tactile frames with truth on disk,
 //! to try `dexitac analyze` without a sensor.
 
+use crate::exit::Outcome;
+use anyhow::anyhow;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use dexitac_tactile::frame::GreyFrame;
 use dexitac_tactile::synth::{self, Category};
@@ -32,28 +33,25 @@ pub struct SynthArgs {
     height: usize,
 }
 
-/// Runs the subcommand.
-pub fn run(args: &SynthArgs) -> ExitCode {
-    match run_inner(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(msg) => {
-            eprintln!("dexitac synth-frames: error: {msg}");
-            ExitCode::from(2)
-        }
+impl SynthArgs {
+    /// Runs the command.
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        run_inner(self)?;
+        Ok(Outcome::Success)
     }
 }
 
-fn run_inner(args: &SynthArgs) -> Result<(), String> {
+fn run_inner(args: &SynthArgs) -> anyhow::Result<()> {
     let cat = Category::ALL
         .into_iter()
         .find(|c| c.name() == args.category)
-        .ok_or_else(|| format!("unknown category {:?}", args.category))?;
+        .ok_or_else(|| anyhow!("unknown category {:?}", args.category))?;
     if !(32..=4096).contains(&args.width) || !(32..=4096).contains(&args.height) {
-        return Err("width and height must be 32..=4096".into());
+        return Err(anyhow!("width and height must be 32..=4096"));
     }
     let frames_dir = args.out.join("frames");
     std::fs::create_dir_all(&frames_dir)
-        .map_err(|e| format!("cannot create {}: {e}", frames_dir.display()))?;
+        .map_err(|e| anyhow!("cannot create {}: {e}", frames_dir.display()))?;
     let sensor = cat.sensor(args.width, args.height, args.seed);
     save(
         &synth::rest_frame(&sensor, args.seed ^ 0xA5A5).image,
@@ -74,8 +72,8 @@ fn run_inner(args: &SynthArgs) -> Result<(), String> {
         let _ = writeln!(truth, "{name},{cx},{cy},{}", f.contacts.len());
     }
     let path = args.out.join("truth.csv");
-    std::fs::write(&path, truth).map_err(|e| format!("cannot write {}: {e}", path.display()))?;
-    eprintln!(
+    std::fs::write(&path, truth).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
+    tracing::info!(
         "dexitac synth-frames: {} {} frames in {}",
         args.frames,
         cat.name(),
@@ -84,7 +82,7 @@ fn run_inner(args: &SynthArgs) -> Result<(), String> {
     Ok(())
 }
 
-fn save(img: &GreyFrame, path: &Path) -> Result<(), String> {
+fn save(img: &GreyFrame, path: &Path) -> anyhow::Result<()> {
     image::save_buffer(
         path,
         img.data(),
@@ -92,5 +90,5 @@ fn save(img: &GreyFrame, path: &Path) -> Result<(), String> {
         img.height() as u32,
         image::ExtendedColorType::L8,
     )
-    .map_err(|e| format!("cannot write {}: {e}", path.display()))
+    .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
 }

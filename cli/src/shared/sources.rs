@@ -20,6 +20,7 @@
 //!
 //! Give `--camera` or `--frames` once per fingertip (sensor 0, then 1).
 
+use anyhow::anyhow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64};
 use std::sync::mpsc;
@@ -94,11 +95,11 @@ pub struct SourceSetup {
 pub type CameraStatsList = Vec<(String, Arc<CameraStats>)>;
 
 /// `--fps` as a frame period, ms.
-pub fn period_ms(fps: f64) -> Result<u64, String> {
+pub fn period_ms(fps: f64) -> anyhow::Result<u64> {
     if fps.is_finite() && fps > 0.1 && fps <= 1_000.0 {
         Ok((1e3 / fps) as u64)
     } else {
-        Err("--fps must lie in 0.1..=1000".into())
+        Err(anyhow!("--fps must lie in 0.1..=1000"))
     }
 }
 
@@ -111,7 +112,7 @@ pub fn open(
     counts: std::ops::RangeInclusive<usize>,
     stop: &Arc<AtomicBool>,
     cameras: &mut CameraStatsList,
-) -> Result<Vec<SourceSetup>, String> {
+) -> anyhow::Result<Vec<SourceSetup>> {
     let period_ms = period_ms(args.fps)?;
     let times = |n: usize| match n {
         1 => "once".to_string(),
@@ -131,7 +132,7 @@ pub fn open(
     if let Some(path) = &args.recording {
         let setups = recording_sources(path, !args.max_speed)?;
         if !counts.contains(&setups.len()) {
-            return Err(format!(
+            return Err(anyhow!(
                 "{}: {} fingertip(s) with frames recorded, this command takes {how_many}",
                 path.display(),
                 setups.len()
@@ -141,12 +142,12 @@ pub fn open(
     }
     if !args.camera.is_empty() {
         if !counts.contains(&args.camera.len()) {
-            return Err(format!("give --camera {how_many} (one per fingertip)"));
+            return Err(anyhow!("give --camera {how_many} (one per fingertip)"));
         }
         return camera_sources(args, params, stop, cameras);
     }
     if !counts.contains(&args.frames.len()) {
-        return Err(format!(
+        return Err(anyhow!(
             "give --frames or --camera {how_many} (one per fingertip), or --render"
         ));
     }
@@ -160,16 +161,16 @@ pub fn open(
     args.frames
         .iter()
         .map(|dir| {
-            let files = sources::image_files(dir).map_err(|e| e.to_string())?;
+            let files = sources::image_files(dir).map_err(|e| anyhow!("{e}"))?;
             if files.len() < 2 {
-                return Err(format!(
+                return Err(anyhow!(
                     "{}: needs a rest frame and at least one more frame",
                     dir.display()
                 ));
             }
-            let rest = sources::load_frame(&files[0], &params.frame).map_err(|e| e.to_string())?;
+            let rest = sources::load_frame(&files[0], &params.frame).map_err(|e| anyhow!("{e}"))?;
             let source = FolderSource::new(files[1..].to_vec(), pace, &params.frame)
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| anyhow!("{e}"))?;
             Ok(SourceSetup {
                 source: Box::new(source),
                 rest: vec![rest],
@@ -184,12 +185,12 @@ pub fn open(
 pub fn calibrated(
     setups: Vec<SourceSetup>,
     params: &Params,
-) -> Result<(Vec<Sensor>, Vec<Vec<GreyFrame>>), String> {
+) -> anyhow::Result<(Vec<Sensor>, Vec<Vec<GreyFrame>>)> {
     let mut sensors = Vec::new();
     let mut rests = Vec::new();
     for s in setups {
         let cal = calibrate::calibrate(&s.rest, params)
-            .map_err(|e| format!("{}: rest frame(s): {e}", s.label))?;
+            .map_err(|e| anyhow!("{}: rest frame(s): {e}", s.label))?;
         sensors.push(Sensor {
             source: s.source,
             pipeline: Pipeline::new(cal, params.clone()),
@@ -203,7 +204,7 @@ pub fn calibrated(
 pub fn print_camera_stats(command: &str, cameras: &CameraStatsList) {
     for (name, stats) in cameras {
         let n = |c: &AtomicU64| CameraStats::get(c);
-        eprintln!(
+        tracing::info!(
             "dexitac {command}: camera {name}: {} frames used, {} stale dropped, {} warm-up, \
              {} corrupt, lost {} times",
             n(&stats.delivered),
@@ -263,8 +264,8 @@ fn steady_source(finger: usize, params: &Params, period_ms: u64) -> SourceSetup 
 }
 
 /// Every fingertip with frames in the recording at `path`.
-fn recording_sources(path: &Path, paced: bool) -> Result<Vec<SourceSetup>, String> {
-    let rec = Recording::open(path, false).map_err(|e| e.to_string())?;
+fn recording_sources(path: &Path, paced: bool) -> anyhow::Result<Vec<SourceSetup>> {
+    let rec = Recording::open(path, false).map_err(|e| anyhow!("{e}"))?;
     let mut out = Vec::new();
     for sensor in rec.sensors() {
         let Some(first) = rec.frames_of(sensor).next() else {
@@ -278,7 +279,7 @@ fn recording_sources(path: &Path, paced: bool) -> Result<Vec<SourceSetup>, Strin
             .iter()
             .map(|f| f.decode())
             .collect::<Result<Vec<_>, _>>()
-            .map_err(|e| format!("{}: sensor {sensor} rest frame: {e}", path.display()))?;
+            .map_err(|e| anyhow!("{}: sensor {sensor} rest frame: {e}", path.display()))?;
         out.push(SourceSetup {
             source: Box::new(ReplaySource::new(&rec, sensor, paced)),
             rest,
@@ -286,7 +287,7 @@ fn recording_sources(path: &Path, paced: bool) -> Result<Vec<SourceSetup>, Strin
         });
     }
     if out.is_empty() {
-        return Err(format!(
+        return Err(anyhow!(
             "{}: no frames recorded (record with frames to replay them)",
             path.display()
         ));
@@ -295,8 +296,8 @@ fn recording_sources(path: &Path, paced: bool) -> Result<Vec<SourceSetup>, Strin
 }
 
 /// `640x480` -> (640, 480).
-fn parse_size(text: &str) -> Result<(u32, u32), String> {
-    let bad = || format!("--camera-size {text:?}: expected WIDTHxHEIGHT, e.g. 640x480");
+fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
+    let bad = || anyhow!("--camera-size {text:?}: expected WIDTHxHEIGHT, e.g. 640x480");
     let (w, h) = text.split_once(['x', 'X']).ok_or_else(bad)?;
     Ok((
         w.trim().parse().map_err(|_| bad())?,
@@ -311,7 +312,7 @@ fn camera_sources(
     params: &Params,
     stop: &Arc<AtomicBool>,
     cameras: &mut CameraStatsList,
-) -> Result<Vec<SourceSetup>, String> {
+) -> anyhow::Result<Vec<SourceSetup>> {
     let (width_px, height_px) = parse_size(&args.camera_size)?;
     let config = CameraConfig {
         request: CaptureRequest {
@@ -328,23 +329,23 @@ fn camera_sources(
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         for event in rx {
-            eprintln!("dexitac: {event}");
+            tracing::info!("dexitac: {event}");
         }
     });
     let mut out = Vec::new();
     for dev in &args.camera {
-        let id: DeviceId = dev.parse()?;
+        let id: DeviceId = dev.parse().map_err(|e: String| anyhow!(e))?;
         let mut cam =
             dexitac_rig::camera::open_camera(&id, &config, &params.frame, Some(stop.clone()))
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| anyhow!("{e}"))?;
         cam.report_to(tx.clone());
         cameras.push((id.to_string(), cam.stats()));
-        eprintln!("dexitac: camera {id}: {}", cam.mode());
+        tracing::info!("dexitac: camera {id}: {}", cam.mode());
         let mut rest = Vec::new();
         while rest.len() < args.rest_frames.max(1) {
-            match cam.next_prepared().map_err(|e| format!("{id}: {e}"))? {
+            match cam.next_prepared().map_err(|e| anyhow!("{id}: {e}"))? {
                 Some((_, frame)) => rest.push(frame),
-                None => return Err("stopped before the rest frames were captured".into()),
+                None => return Err(anyhow!("stopped before the rest frames were captured")),
             }
         }
         out.push(SourceSetup {
@@ -356,24 +357,33 @@ fn camera_sources(
     Ok(out)
 }
 
+/// The sensor config at `path` (`--config SENSOR.toml`), or the paper's
+/// parameters without one.
+pub fn load_sensor_config(path: Option<&Path>) -> anyhow::Result<Params> {
+    match path {
+        Some(path) => Ok(Params::load(path)?),
+        None => Ok(Params::default()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn sizes_parse_or_say_what_is_expected() {
-        assert_eq!(parse_size("640x480"), Ok((640, 480)));
-        assert_eq!(parse_size("320X240"), Ok((320, 240)));
+        assert_eq!(parse_size("640x480").unwrap(), (640, 480));
+        assert_eq!(parse_size("320X240").unwrap(), (320, 240));
         for bad in ["640", "x480", "640x", "axb", "-1x480", ""] {
             let e = parse_size(bad).unwrap_err();
-            assert!(e.contains("WIDTHxHEIGHT"), "{bad}: {e}");
+            assert!(e.to_string().contains("WIDTHxHEIGHT"), "{bad}: {e}");
         }
     }
 
     #[test]
     fn periods_come_from_usable_rates_only() {
-        assert_eq!(period_ms(30.0), Ok(33));
-        assert_eq!(period_ms(1000.0), Ok(1));
+        assert_eq!(period_ms(30.0).unwrap(), 33);
+        assert_eq!(period_ms(1000.0).unwrap(), 1);
         for bad in [0.0, -5.0, f64::NAN, f64::INFINITY, 2000.0] {
             assert!(period_ms(bad).is_err(), "{bad}");
         }

@@ -1,20 +1,18 @@
-//! `dexitac workspace` (finger workspace: points CSV, PNG views, extents and
-//! volume JSON) and `dexitac fit-actuator` (least-squares calibration of the
-//! linear pressure -> angle model). Arguments, runs and I/O only; the
-//! computations are in `dexitac_gripper::{configuration, actuator, kinematics, workspace}`.
+//! `dexitac workspace`: a finger's workspace (points CSV, views, extents
+//! and volume JSON). Arguments, runs and I/O only; the computations are in
+//! `dexitac_gripper::{configuration, kinematics, workspace}`.
 
+use crate::exit::Outcome;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::Instant;
 
-use dexitac_gripper::actuator::{self, FitError, LineFit};
 use dexitac_gripper::configuration::{ConfigError, FingerType, GripperConfig, Preset};
 use dexitac_gripper::workspace::{self, Grid, TipPoint, VolumeEstimate, WorkspaceError};
 use dexitac_view::figures::workspace::{self as workspace_figure, View};
 
-/// Error of the kinematics subcommands.
+/// Error of `dexitac workspace`.
 #[derive(Debug, thiserror::Error)]
 pub enum CliError {
     /// The gripper config could not be loaded.
@@ -23,14 +21,6 @@ pub enum CliError {
     /// The workspace computation failed.
     #[error(transparent)]
     Workspace(#[from] WorkspaceError),
-    /// The calibration data could not be fitted.
-    #[error("{path}: {source}")]
-    Fit {
-        /// The data file.
-        path: PathBuf,
-        /// What is wrong with it.
-        source: FitError,
-    },
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {
@@ -57,15 +47,11 @@ pub enum CliError {
     },
 }
 
-/// Prints an error as `dexitac <command>: error: ...` and maps it to the
-/// exit status (0 ok, 2 error).
-pub fn exit(command: &str, result: Result<(), CliError>) -> ExitCode {
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("dexitac {command}: error: {e}");
-            ExitCode::from(2)
-        }
+impl WorkspaceArgs {
+    /// Runs `dexitac workspace`.
+    pub fn run(&self) -> anyhow::Result<Outcome> {
+        run_workspace(self)?;
+        Ok(Outcome::Success)
     }
 }
 
@@ -162,29 +148,6 @@ pub struct WorkspaceArgs {
     out: PathBuf,
 }
 
-/// Arguments of `dexitac fit-actuator`.
-#[derive(Debug, clap::Args)]
-pub struct FitArgs {
-    /// Measured `pressure_kpa,angle_deg` rows (optional header, `#` comments).
-    #[arg(long, value_name = "DATA.csv")]
-    data: PathBuf,
-    /// Which joint the data are from (names the keys in --out).
-    #[arg(long, value_enum, default_value = "rot")]
-    joint: JointArg,
-    /// Write the fitted model as a TOML fragment for a gripper config.
-    #[arg(long, value_name = "FIT.toml")]
-    out: Option<PathBuf>,
-}
-
-/// The joint a calibration is for.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum JointArg {
-    /// Rot joint: `[rot] slope_deg_per_kpa, intercept_deg`.
-    Rot,
-    /// Dex joint, one chamber pressurised alone: `[dex] bend_slope_deg_per_kpa`.
-    Dex,
-}
-
 /// Most pressure levels per chamber in the points CSV.
 const MAX_CSV_LEVELS: usize = 40;
 
@@ -192,7 +155,7 @@ const MAX_CSV_LEVELS: usize = 40;
 const MAX_IMAGE_PX: u32 = 8192;
 
 /// Runs `dexitac workspace`.
-pub fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
+fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
     if !(64..=MAX_IMAGE_PX).contains(&args.image_px) {
         return Err(CliError::Arg {
             arg: "image-px",
@@ -293,8 +256,7 @@ pub fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
         elapsed_s
     );
     if fine.max_neighbour_gap_mm > fine.voxel_mm {
-        eprintln!(
-            "dexitac workspace: warning: neighbouring samples land up to {:.2} mm apart, more than the {} mm voxel: the volume may be underestimated",
+        tracing::warn!("dexitac workspace: neighbouring samples land up to {:.2} mm apart, more than the {} mm voxel: the volume may be underestimated",
             fine.max_neighbour_gap_mm, fine.voxel_mm
         );
     }
@@ -371,75 +333,4 @@ fn write_points(path: &Path, samples: &[workspace::Sample]) -> Result<(), CliErr
         .map_err(io)?;
     }
     w.flush().map_err(io)
-}
-
-/// Runs `dexitac fit-actuator`.
-pub fn run_fit(args: &FitArgs) -> Result<(), CliError> {
-    let text = std::fs::read_to_string(&args.data).map_err(|source| CliError::Io {
-        path: args.data.clone(),
-        source,
-    })?;
-    let fit_err = |source| CliError::Fit {
-        path: args.data.clone(),
-        source,
-    };
-    let points = actuator::parse_csv(&text).map_err(fit_err)?;
-    let fit = actuator::fit_line(&points).map_err(fit_err)?;
-    println!("{} points from {}", fit.points, args.data.display());
-    println!("slope          {:.6} deg/kPa", fit.slope_deg_per_kpa);
-    println!("intercept      {:.4} deg", fit.intercept_deg);
-    println!("R^2            {:.6}", fit.r_squared);
-    println!("RMS residual   {:.4} deg", fit.rms_residual_deg);
-    println!("max |residual| {:.4} deg", fit.max_abs_residual_deg);
-    if let Some(out) = &args.out {
-        std::fs::write(out, fit_toml(&fit, args.joint, &args.data)).map_err(|source| {
-            CliError::Io {
-                path: out.clone(),
-                source,
-            }
-        })?;
-        println!("wrote {}", out.display());
-    }
-    Ok(())
-}
-
-/// The fit as a TOML fragment to paste into a gripper config.
-fn fit_toml(fit: &LineFit, joint: JointArg, data: &Path) -> String {
-    let quality = format!(
-        "# dexitac fit-actuator --data {}\n# points = {}, R^2 = {:.6}, RMS residual = {:.4} deg, max |residual| = {:.4} deg\n",
-        data.display(),
-        fit.points,
-        fit.r_squared,
-        fit.rms_residual_deg,
-        fit.max_abs_residual_deg
-    );
-    match joint {
-        JointArg::Rot => format!(
-            "{quality}[rot]\nslope_deg_per_kpa = {:?}\nintercept_deg = {:?}\n",
-            fit.slope_deg_per_kpa, fit.intercept_deg
-        ),
-        JointArg::Dex => format!(
-            "{quality}# The Dex model has no intercept (straight at 0 kPa); the fitted one was {:.4} deg.\n[dex]\nbend_slope_deg_per_kpa = {:?}\n",
-            fit.intercept_deg,
-            fit.slope_deg_per_kpa.abs()
-        ),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn fit_toml_is_valid_toml_with_the_fitted_values() {
-        let fit = actuator::fit_line(&[(0.0, 1.0), (10.0, 16.0), (20.0, 31.0)]).unwrap();
-        let text = fit_toml(&fit, JointArg::Rot, Path::new("a.csv"));
-        let table: toml::Table = toml::from_str(&text).unwrap();
-        let rot = table["rot"].as_table().unwrap();
-        assert_eq!(rot["slope_deg_per_kpa"].as_float(), Some(1.5));
-        assert_eq!(rot["intercept_deg"].as_float(), Some(1.0));
-        let text = fit_toml(&fit, JointArg::Dex, Path::new("a.csv"));
-        let table: toml::Table = toml::from_str(&text).unwrap();
-        assert_eq!(table["dex"]["bend_slope_deg_per_kpa"].as_float(), Some(1.5));
-    }
 }
