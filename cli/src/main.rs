@@ -143,8 +143,16 @@ fn main() -> ExitCode {
     match command.run() {
         Ok(outcome) => outcome.code(),
         Err(e) => {
-            // `{:#}`: the error and its causes on one line.
-            eprintln!("dexitac {}: error: {e:#}", command.name());
+            // The error and those of its causes that its message does not
+            // already quote (thiserror errors often show their source).
+            let mut message = e.to_string();
+            for cause in e.chain().skip(1) {
+                let cause = cause.to_string();
+                if !message.contains(&cause) {
+                    message = format!("{message}: {cause}");
+                }
+            }
+            eprintln!("dexitac {}: error: {message}", command.name());
             ExitCode::from(command.error_code())
         }
     }

@@ -79,6 +79,12 @@ pub enum ConfigError {
         /// What is allowed.
         reason: &'static str,
     },
+    /// No preset has this name.
+    #[error("no gripper preset `{0}` (hookgrip, supportgrip, closuregrip, pinchgrip)")]
+    UnknownPreset(String),
+    /// A key that a configuration without a preset needs.
+    #[error("{0} is missing (give it, or a preset to start from)")]
+    Missing(&'static str),
 }
 
 /// Assembly order of a finger, from the palm to the fingertip.

@@ -40,10 +40,12 @@ pub const STABLE_SPAN_MS: u64 = 3_000;
 pub const NO_CONTACT_TIMEOUT_MS: u64 = 10_000;
 
 /// Number of tactile sensors (one per fingertip).
-pub const SENSOR_COUNT: usize = 2;
+pub const SENSOR_COUNT: usize = crate::configuration::FINGER_COUNT;
 
-/// Thresholds of Algorithm 1; [`Default`] uses the paper's values.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Thresholds of Algorithm 1; [`Default`] uses the paper's values. The
+/// `[grasp]` table of a rig config (any subset of the fields).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(default, deny_unknown_fields)]
 pub struct GraspParams {
     /// T1: a centre moving less than this over the stable span is stable,
     /// more is a disturbance, mm.
@@ -54,6 +56,23 @@ pub struct GraspParams {
     pub stable_span_ms: u64,
     /// Release when a sensor has no contact this long after closing began, ms.
     pub no_contact_timeout_ms: u64,
+}
+
+impl GraspParams {
+    /// Checks the thresholds: positive and finite, T2 above T1, a span.
+    pub fn validate(&self) -> Result<(), &'static str> {
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        if !positive(self.stable_shift_mm) || !positive(self.slip_shift_mm) {
+            return Err("stable_shift_mm and slip_shift_mm must be positive");
+        }
+        if self.slip_shift_mm <= self.stable_shift_mm {
+            return Err("slip_shift_mm (T2) must be above stable_shift_mm (T1)");
+        }
+        if self.stable_span_ms == 0 {
+            return Err("stable_span_ms must be positive");
+        }
+        Ok(())
+    }
 }
 
 impl Default for GraspParams {

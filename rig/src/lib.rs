@@ -1,6 +1,8 @@
 //! The DexiTac rig on the PC: what connects the pure tactile and gripper
 //! crates to hardware.
 //!
+//! - [`config`]: the rig config (one TOML for a real rig and the
+//!   simulator's scenarios);
 //! - [`source`]: the [`FrameSource`](source::FrameSource) trait, timed
 //!   frames and the [`Clock`](source::Clock);
 //! - [`event`]: what the task loop reports ([`RuntimeEvent`](event::RuntimeEvent));
@@ -14,6 +16,7 @@
 #![warn(missing_docs)]
 
 pub mod camera;
+pub mod config;
 pub mod event;
 pub mod link;
 pub mod recording;

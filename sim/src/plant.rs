@@ -59,8 +59,8 @@ use dexitac_gripper::manipulation::MANIPULATION_CHAMBERS;
 const GRAVITY_M_PER_S2: f64 = 9.81;
 /// Chambers per finger.
 pub const CHAMBERS_PER_FINGER: usize = 4;
-/// Fingers (and tactile sensors).
-pub const FINGER_COUNT: usize = 2;
+/// Fingers (and tactile sensors): the gripper's.
+pub use dexitac_gripper::configuration::FINGER_COUNT;
 
 /// Gripper and actuator coefficients.
 #[derive(Debug, Clone, PartialEq, Deserialize)]

@@ -49,9 +49,16 @@ fn record_inner(args: &RecordArgs) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     crate::shared::stop_on_ctrl_c(&stop);
     let mut cameras = Vec::new();
-    let setups = crate::shared::sources::open(&args.sources, &params, 1..=2, &stop, &mut cameras)?;
+    let setups = crate::shared::sources::open(
+        &args.sources,
+        std::slice::from_ref(&params),
+        1..=2,
+        &stop,
+        &mut cameras,
+    )?;
     let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
-    let (sensors, rests) = crate::shared::sources::calibrated(setups, &params)?;
+    let (sensors, rests) =
+        crate::shared::sources::calibrated(setups, std::slice::from_ref(&params))?;
     let recorder = open_recorder(
         &args.out,
         "record",

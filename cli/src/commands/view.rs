@@ -73,9 +73,15 @@ impl ViewArgs {
         let stop = Arc::new(AtomicBool::new(false));
         stop_on_ctrl_c(&stop);
         let mut cameras = Vec::new();
-        let setups = sources::open(&self.sources, &params, 1..=2, &stop, &mut cameras)?;
+        let setups = sources::open(
+            &self.sources,
+            std::slice::from_ref(&params),
+            1..=2,
+            &stop,
+            &mut cameras,
+        )?;
         let labels: Vec<String> = setups.iter().map(|s| s.label.clone()).collect();
-        let (sensors, _) = sources::calibrated(setups, &params)?;
+        let (sensors, _) = sources::calibrated(setups, std::slice::from_ref(&params))?;
         let mut dashboard = calibrated_dashboard("VIEW (NO BOARD)", &params, &sensors);
         // Algorithm 1 starts closing at t = 0 (no board: only its decisions show).
         dashboard.set_phase(0, GraspPhase::Closing);

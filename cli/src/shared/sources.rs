@@ -103,12 +103,27 @@ pub fn period_ms(fps: f64) -> anyhow::Result<u64> {
     }
 }
 
+/// The parameters of fingertip `finger`: one per fingertip, the last one
+/// standing for the fingertips after it.
+fn params_for(params: &[Params], finger: usize) -> &Params {
+    params
+        .get(finger)
+        .or_else(|| params.last())
+        .unwrap_or_else(|| default_params())
+}
+
+fn default_params() -> &'static Params {
+    static DEFAULT: std::sync::OnceLock<Params> = std::sync::OnceLock::new();
+    DEFAULT.get_or_init(Params::default)
+}
+
 /// Opens the sources; `counts` is how many fingertips the command accepts
-/// (`run`: exactly 2; `record`, `view`: 1 or 2). Camera counters are added
-/// to `cameras`; `stop` ends a wait on a lost camera.
+/// (`run`: exactly 2; `record`, `view`: 1 or 2); `params` holds each
+/// fingertip's pipeline parameters (see [`params_for`]). Camera counters
+/// are added to `cameras`; `stop` ends a wait on a lost camera.
 pub fn open(
     args: &SourceArgs,
-    params: &Params,
+    params: &[Params],
     counts: std::ops::RangeInclusive<usize>,
     stop: &Arc<AtomicBool>,
     cameras: &mut CameraStatsList,
@@ -126,7 +141,7 @@ pub fn open(
     };
     if args.render {
         return Ok((0..*counts.end())
-            .map(|finger| steady_source(finger, params, period_ms))
+            .map(|finger| steady_source(finger, params_for(params, finger), period_ms))
             .collect());
     }
     if let Some(path) = &args.recording {
@@ -160,7 +175,9 @@ pub fn open(
     };
     args.frames
         .iter()
-        .map(|dir| {
+        .enumerate()
+        .map(|(finger, dir)| {
+            let params = params_for(params, finger);
             let files = sources::image_files(dir).map_err(|e| anyhow!("{e}"))?;
             if files.len() < 2 {
                 return Err(anyhow!(
@@ -184,11 +201,12 @@ pub fn open(
 /// the rest frames (for a recording).
 pub fn calibrated(
     setups: Vec<SourceSetup>,
-    params: &Params,
+    params: &[Params],
 ) -> anyhow::Result<(Vec<Sensor>, Vec<Vec<GreyFrame>>)> {
     let mut sensors = Vec::new();
     let mut rests = Vec::new();
-    for s in setups {
+    for (finger, s) in setups.into_iter().enumerate() {
+        let params = params_for(params, finger);
         let cal = calibrate::calibrate(&s.rest, params)
             .map_err(|e| anyhow!("{}: rest frame(s): {e}", s.label))?;
         sensors.push(Sensor {
@@ -309,7 +327,7 @@ fn parse_size(text: &str) -> anyhow::Result<(u32, u32)> {
 /// rest frames, and prints camera events (lost, recovered) on stderr.
 fn camera_sources(
     args: &SourceArgs,
-    params: &Params,
+    params: &[Params],
     stop: &Arc<AtomicBool>,
     cameras: &mut CameraStatsList,
 ) -> anyhow::Result<Vec<SourceSetup>> {
@@ -333,7 +351,8 @@ fn camera_sources(
         }
     });
     let mut out = Vec::new();
-    for dev in &args.camera {
+    for (finger, dev) in args.camera.iter().enumerate() {
+        let params = params_for(params, finger);
         let id: DeviceId = dev.parse().map_err(|e: String| anyhow!(e))?;
         let mut cam =
             dexitac_rig::camera::open_camera(&id, &config, &params.frame, Some(stop.clone()))
