@@ -70,20 +70,23 @@ extern crate std;
 
 pub mod control;
 pub mod cost_scenario;
+pub mod led;
+pub mod persist;
 pub mod queue;
 pub mod reset;
 pub mod sensor;
 pub mod tank_model;
 
-pub use control::hw::{Clock, PressureSource, Pumps, SensorError, TankReadings, Valves};
-pub use control::{Config, Controller, LinkStats, PumpOutputs};
-pub use queue::{ByteQueue, FrameSink, QueueFull};
+pub use control::hw::{Clock, PressureSource, Pumps, SensorError, Valves};
+pub use control::{Config, Controller, LinkStats, PumpOutputs, TickReport};
+pub use queue::{ByteQueue, FrameSink, Priority, QueueFull, TxQueues};
+pub use sensor::SensorSamples;
 
 use dexitac_protocol::FirmwareVersion;
 
 /// This firmware's version, reported in the hello reply.
 pub const FIRMWARE_VERSION: FirmwareVersion = FirmwareVersion {
     major: 0,
-    minor: 1,
+    minor: 2,
     patch: 0,
 };
