@@ -63,8 +63,9 @@ pub fn decode(words: [u32; RECORD_WORDS]) -> LastStop {
             .map_or(LastStop::None, |&fault| LastStop::Trip { fault }),
         KIND_PANIC => LastStop::Panic { line: value },
         KIND_HARD_FAULT => LastStop::HardFault { pc: value },
-        KIND_INTERRUPT => i16::try_from(value as i32)
-            .map_or(LastStop::None, |irqn| LastStop::UnexpectedInterrupt { irqn }),
+        KIND_INTERRUPT => i16::try_from(value as i32).map_or(LastStop::None, |irqn| {
+            LastStop::UnexpectedInterrupt { irqn }
+        }),
         _ => LastStop::None,
     }
 }

@@ -227,8 +227,10 @@ impl FrontEnd {
     }
 
     fn counts(&self, input_uv: i64, divider: Divider, vdda_mv: u32) -> u16 {
-        let adc_uv = input_uv * i64::from(divider.numerator) / i64::from(divider.denominator.max(1));
-        let counts = adc_uv * i64::from(ADC_FULL_SCALE_COUNTS) / (i64::from(vdda_mv.max(1)) * 1_000);
+        let adc_uv =
+            input_uv * i64::from(divider.numerator) / i64::from(divider.denominator.max(1));
+        let counts =
+            adc_uv * i64::from(ADC_FULL_SCALE_COUNTS) / (i64::from(vdda_mv.max(1)) * 1_000);
         u16::try_from(counts.clamp(0, i64::from(ADC_FULL_SCALE_COUNTS))).unwrap_or(0)
     }
 }

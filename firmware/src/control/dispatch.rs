@@ -101,9 +101,7 @@ fn arm(ctl: &mut Controller) -> Result<(), NackReason> {
     match ctl.state {
         ArmState::Armed => Ok(()),
         ArmState::Tripped => Err(NackReason::Tripped),
-        ArmState::Disarmed if !ctl.present.is_empty() || !ctl.zeroed() => {
-            Err(NackReason::Refused)
-        }
+        ArmState::Disarmed if !ctl.present.is_empty() || !ctl.zeroed() => Err(NackReason::Refused),
         ArmState::Disarmed => {
             ctl.state = ArmState::Armed;
             Ok(())

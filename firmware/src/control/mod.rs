@@ -532,19 +532,17 @@ impl Controller {
         let limits = self.config.monitor_limits();
         let trip_after = self.config.trip_after_ticks;
         let positive_findings = match valid_reading(self.positive.reading()) {
-            Some(pa) => self.positive_monitor.check(
-                Tank::Positive.toward_limit_pa(pa),
-                now_ms,
-                &limits,
-            ),
+            Some(pa) => {
+                self.positive_monitor
+                    .check(Tank::Positive.toward_limit_pa(pa), now_ms, &limits)
+            }
             None => Default::default(),
         };
         let negative_findings = match valid_reading(self.negative.reading()) {
-            Some(pa) => self.negative_monitor.check(
-                Tank::Negative.toward_limit_pa(pa),
-                now_ms,
-                &limits,
-            ),
+            Some(pa) => {
+                self.negative_monitor
+                    .check(Tank::Negative.toward_limit_pa(pa), now_ms, &limits)
+            }
             None => Default::default(),
         };
         let mut flags = self

@@ -109,7 +109,12 @@ impl PumpMonitor {
     /// Checks the period that ends `now_ms`, during which the pump was as
     /// last reported by [`PumpMonitor::record`]. `toward_limit_pa` is the
     /// filtered reading in pumping direction ([`Tank::toward_limit_pa`]).
-    pub fn check(&mut self, toward_limit_pa: i32, now_ms: u32, limits: &MonitorLimits) -> PumpFindings {
+    pub fn check(
+        &mut self,
+        toward_limit_pa: i32,
+        now_ms: u32,
+        limits: &MonitorLimits,
+    ) -> PumpFindings {
         let Some(on_since_ms) = self.on_since_ms else {
             return PumpFindings::default();
         };

@@ -105,7 +105,12 @@ impl TankChannel {
     }
 
     /// The conditions this tank shows now.
-    pub fn conditions(&self, tank: Tank, findings: PumpFindings, trip_after_ticks: u32) -> FaultFlags {
+    pub fn conditions(
+        &self,
+        tank: Tank,
+        findings: PumpFindings,
+        trip_after_ticks: u32,
+    ) -> FaultFlags {
         let [over_limit, sensor, run_time, no_rise] = faults_of(tank);
         let mut flags = FaultFlags::NONE;
         if self.invalid_ticks >= trip_after_ticks {
@@ -156,12 +161,16 @@ mod tests {
         let mut c = TankChannel::new();
         c.update(Tank::Positive, at);
         c.update(Tank::Positive, at);
-        assert!(c.conditions(Tank::Positive, PumpFindings::default(), 3).is_empty());
+        assert!(c
+            .conditions(Tank::Positive, PumpFindings::default(), 3)
+            .is_empty());
         for _ in 0..3 {
             c.update(Tank::Positive, below);
         }
         c.update(Tank::Positive, at);
-        assert!(c.conditions(Tank::Positive, PumpFindings::default(), 3).is_empty());
+        assert!(c
+            .conditions(Tank::Positive, PumpFindings::default(), 3)
+            .is_empty());
     }
 
     #[test]

@@ -352,9 +352,7 @@ fn faults_of(msgs: &[McuMsg]) -> Vec<Fault> {
 
 fn clear(faults: &[Fault]) -> HostMsg {
     HostMsg::ClearFaults {
-        faults: faults
-            .iter()
-            .fold(FaultFlags::NONE, |acc, f| acc.with(*f)),
+        faults: faults.iter().fold(FaultFlags::NONE, |acc, f| acc.with(*f)),
     }
 }
 
@@ -425,7 +423,10 @@ fn hello_reports_versions_limits_latches_and_last_stop() {
     assert_eq!(h.chamber_count, 8);
     assert_eq!(h.reset_cause, ResetCause::IndependentWatchdog);
     assert_eq!(h.last_stop, LastStop::Panic { line: 77 });
-    assert_eq!(h.latched_faults, FaultFlags::NONE.with(Fault::ClockFallback));
+    assert_eq!(
+        h.latched_faults,
+        FaultFlags::NONE.with(Fault::ClockFallback)
+    );
     assert_eq!(h.min_telemetry_interval_ms, 8);
 }
 
@@ -633,7 +634,10 @@ fn stuck_sensor_while_pumping_trips_despite_noise() {
     // Latched after the pumps stopped (the condition is gone).
     b.ticks(10);
     b.nack(HostMsg::Arm, NackReason::Tripped);
-    b.ack(clear(&[Fault::PositivePumpNoRise, Fault::NegativePumpNoRise]));
+    b.ack(clear(&[
+        Fault::PositivePumpNoRise,
+        Fault::NegativePumpNoRise,
+    ]));
     b.ack(HostMsg::Arm);
 }
 
@@ -739,7 +743,10 @@ fn boot_zero_removes_a_sensor_offset_inside_the_window() {
     assert!((zn + 2_500).abs() < 800, "{zn}");
     b.ticks(20);
     let (p, n) = b.ctl.readings();
-    assert!(p.unwrap().abs() < 800 && n.unwrap().abs() < 800, "{p:?} {n:?}");
+    assert!(
+        p.unwrap().abs() < 800 && n.unwrap().abs() < 800,
+        "{p:?} {n:?}"
+    );
 }
 
 #[test]
@@ -892,7 +899,20 @@ fn corrupted_frame_is_dropped_and_malformed_frame_is_nacked() {
     b.ctl.receive(&frame, &b.rig, &mut b.tx);
     assert!(b.drain().is_empty());
     // Valid CRC, but a valve state tag of 7: malformed.
-    let mut raw = std::vec![dexitac_protocol::PROTOCOL_VERSION, 10, 0, 2, 7, 0, 0, 0, 0, 0, 0, 0];
+    let mut raw = std::vec![
+        dexitac_protocol::PROTOCOL_VERSION,
+        10,
+        0,
+        2,
+        7,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0
+    ];
     let crc = crc32c(&raw);
     raw.extend_from_slice(&crc.to_le_bytes());
     let mut wire = cobs_encode(&raw);
@@ -930,7 +950,20 @@ fn crc32c(bytes: &[u8]) -> u32 {
 
 #[test]
 fn test_frame_helpers_match_the_protocol_encoder() {
-    let mut raw = std::vec![dexitac_protocol::PROTOCOL_VERSION, 10, 0, 2, 0, 0, 0, 0, 0, 0, 0, 0];
+    let mut raw = std::vec![
+        dexitac_protocol::PROTOCOL_VERSION,
+        10,
+        0,
+        2,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0,
+        0
+    ];
     let crc = crc32c(&raw);
     raw.extend_from_slice(&crc.to_le_bytes());
     let mut wire = cobs_encode(&raw);
@@ -1053,7 +1086,10 @@ impl Observer {
         let state = b.ctl.state();
         let (positive, negative) = b.ctl.readings();
         // Interlock, physically.
-        prop_assert!(!b.rig.both_open_ever, "inlet and outlet physically open together");
+        prop_assert!(
+            !b.rig.both_open_ever,
+            "inlet and outlet physically open together"
+        );
         // Pumps run only armed, with a valid filtered reading inside the limit.
         if b.rig.pumps.positive_on {
             prop_assert_eq!(state, ArmState::Armed);
@@ -1074,11 +1110,7 @@ impl Observer {
         // Not armed: pumps off, valves sealed or venting.
         if state != ArmState::Armed {
             prop_assert_eq!(b.rig.pumps, PumpOutputs::OFF);
-            prop_assert!(b
-                .rig
-                .chambers
-                .iter()
-                .all(|c| *c != ValveState::Inflate));
+            prop_assert!(b.rig.chambers.iter().all(|c| *c != ValveState::Inflate));
         }
         self.clear_seen = false;
         self.last_state = state;
@@ -1191,7 +1223,16 @@ fn physics() -> impl Strategy<Value = Physics> {
         any::<u64>(),
     )
         .prop_map(
-            |(noise_pa, supply_mv, vdda_mv, release_ms, pump_strength_pct, leak_tau_ms, offset_pa, seed)| {
+            |(
+                noise_pa,
+                supply_mv,
+                vdda_mv,
+                release_ms,
+                pump_strength_pct,
+                leak_tau_ms,
+                offset_pa,
+                seed,
+            )| {
                 Physics {
                     noise_pa,
                     supply_mv,
@@ -1264,8 +1305,8 @@ fn run_physical(phys: &Physics, events: &[PhysEvent]) -> Result<(), TestCaseErro
     // How long each pump has run without pause since a no-rise fault was injected.
     let mut pump_on_since_fault_ms = [0u32; 2];
     let tick = |b: &mut Bench,
-                    injected: &[Option<(Injected, u32)>; 2],
-                    pump_on: &mut [u32; 2]|
+                injected: &[Option<(Injected, u32)>; 2],
+                pump_on: &mut [u32; 2]|
      -> Result<(), TestCaseError> {
         b.tick();
         let (p, n) = b.rig.model_pa();
@@ -1285,7 +1326,12 @@ fn run_physical(phys: &Physics, events: &[PhysEvent]) -> Result<(), TestCaseErro
             match what {
                 Injected::OpenWire(_) => {
                     if b.rig.now_ms - at_ms >= OPEN_WIRE_TRIP_MS {
-                        prop_assert!(faults.contains(sensor), "open wire {} ms ago, {:?}", b.rig.now_ms - at_ms, faults);
+                        prop_assert!(
+                            faults.contains(sensor),
+                            "open wire {} ms ago, {:?}",
+                            b.rig.now_ms - at_ms,
+                            faults
+                        );
                     }
                 }
                 Injected::StuckSensor(_) | Injected::DeadPump(_) => {
@@ -1330,7 +1376,8 @@ fn run_physical(phys: &Physics, events: &[PhysEvent]) -> Result<(), TestCaseErro
                     Injected::StuckSensor(_) => {
                         let (p, n) = b.rig.model_pa();
                         let pa = if t == 0 { p } else { n };
-                        let counts = NOMINAL_FRONT_END.sensor_counts(pa, b.rig.supply_mv, b.rig.vdda_mv);
+                        let counts =
+                            NOMINAL_FRONT_END.sensor_counts(pa, b.rig.supply_mv, b.rig.vdda_mv);
                         let f = &mut b.rig.sensor_faults;
                         *(if t == 0 { &mut f.0 } else { &mut f.1 }) = SensorFault::Stuck(counts);
                     }
