@@ -14,16 +14,19 @@
 use std::hint::black_box;
 use std::time::Instant;
 
+use dexitac_firmware::control::ZERO_AT_TICK;
 use dexitac_firmware::cost_scenario;
+use dexitac_firmware::sensor::{SensorSamples, NOMINAL_FRONT_END, OVERSAMPLE};
 use dexitac_firmware::tank_model::{TankModel, TankModelParams};
 use dexitac_firmware::{
-    ByteQueue, Clock, Config, Controller, PressureSource, PumpOutputs, Pumps, TankReadings, Valves,
+    Clock, Config, Controller, PressureSource, PumpOutputs, Pumps, TxQueues, Valves,
 };
 use dexitac_protocol::{Chambers, EncodedFrame, HostMsg, ResetCause, ValveState, CHAMBER_COUNT};
 
 struct Rig {
     now_ms: u32,
-    readings: TankReadings,
+    /// True tank pressures, pascal.
+    tanks_pa: (i32, i32),
     pumps: PumpOutputs,
     chambers: Chambers,
 }
@@ -35,8 +38,14 @@ impl Clock for Rig {
 }
 
 impl PressureSource for Rig {
-    fn read_tanks(&mut self) -> TankReadings {
-        self.readings
+    fn read_samples(&mut self) -> SensorSamples {
+        let fe = NOMINAL_FRONT_END;
+        let counts = |pa| Ok([fe.sensor_counts(pa, 5_000, 3_300); OVERSAMPLE]);
+        SensorSamples {
+            positive: counts(self.tanks_pa.0),
+            negative: counts(self.tanks_pa.1),
+            supply: Ok([fe.supply_counts(5_000, 3_300); OVERSAMPLE]),
+        }
     }
 }
 
@@ -60,19 +69,20 @@ fn frame(seq: u16, msg: HostMsg) -> EncodedFrame {
 }
 
 /// An armed controller regulating both pumps, one chamber inflating.
-fn setup() -> (Controller, Rig, ByteQueue<4096>, TankModel) {
+fn setup() -> (Controller, Rig, TxQueues<4096, 4096>, TankModel) {
     let mut ctl = Controller::new(Config::default(), ResetCause::PowerOn);
     let mut rig = Rig {
         now_ms: 0,
-        readings: TankReadings {
-            positive_pa: Ok(0),
-            negative_pa: Ok(0),
-        },
+        tanks_pa: (0, 0),
         pumps: PumpOutputs::OFF,
         chambers: [ValveState::Hold; CHAMBER_COUNT],
     };
-    let mut tx = ByteQueue::new();
-    ctl.tick(&mut rig, &mut tx);
+    let mut tx = TxQueues::new();
+    // The boot-time zero comes first; arming waits for it.
+    for _ in 0..=ZERO_AT_TICK {
+        rig.now_ms += 1;
+        ctl.tick(&mut rig, &mut tx);
+    }
     for (seq, msg) in (1..).zip(cost_scenario::setup_commands()) {
         ctl.receive(&frame(seq, msg), &rig, &mut tx);
     }
@@ -87,10 +97,7 @@ fn run(n: u32, with_controller: bool) -> (u32, u32) {
         rig.now_ms += 1;
         model.advance(1, rig.pumps, &rig.chambers);
         let (p, q) = model.tanks_pa();
-        rig.readings = TankReadings {
-            positive_pa: Ok(p),
-            negative_pa: Ok(q),
-        };
+        rig.tanks_pa = (p, q);
         if with_controller {
             if rig.now_ms % 100 == 0 {
                 ctl.receive(black_box(&heartbeat), &rig, &mut tx);

@@ -8,12 +8,16 @@
 //! whatever the host sends.
 //!
 //! - [`control`]: the [`Controller`] (command dispatch, pump regulation,
-//!   trips, telemetry). Hardware reaches it only through the traits in
-//!   [`control::hw`] ([`Valves`], [`Pumps`], [`PressureSource`], [`Clock`]),
-//!   so the same code runs on the board, in QEMU and in the host simulator.
-//! - [`queue`]: fixed-size byte queues for the serial link ([`FrameSink`]).
-//! - [`sensor`]: ADC counts -> pascal, the sensor calibration in one place.
-//! - [`tank_model`]: a simulated pair of tanks (QEMU build, host simulator).
+//!   trips, valve dead time, telemetry). Hardware reaches it only through
+//!   the traits in [`control::hw`] ([`Valves`], [`Pumps`], [`PressureSource`],
+//!   [`Clock`]), so the same code runs on the board, in QEMU and in the host
+//!   simulator.
+//! - [`sensor`]: ADC samples -> pascal, ratiometric to the measured sensor
+//!   supply, with a zero offset and oversampling.
+//! - [`queue`]: transmit queues by priority ([`TxQueues`], [`FrameSink`]).
+//! - [`persist`]: the record of the last trip / panic / fault that survives a reset.
+//! - [`led`]: the status LED's blink codes.
+//! - [`tank_model`]: a simulated pair of tanks (QEMU build, host simulator, tests).
 //! - [`reset`]: the reset cause from the STM32 `RCC_CSR` register.
 //!
 //! # Safe state
@@ -24,43 +28,43 @@
 //! the de-energised state of the hardware (normally-closed valves, pump
 //! drivers off), i.e. the state after a reset, a watchdog reset or a power
 //! loss. The host may still vent explicitly ([`HostMsg::VentAll`](dexitac_protocol::HostMsg::VentAll))
-//! while tripped or disarmed; the pumps stay off.
+//! while tripped or disarmed, unless the negative tank is past its limit or
+//! has no valid reading; the pumps stay off.
 //!
 //! # Fault table
 //!
-//! Every condition is checked once per control tick (1 ms). "Trip" means:
-//! state [`ArmState::Tripped`](dexitac_protocol::ArmState::Tripped), the safe
-//! state above, pump modes reset to off, one
-//! [`McuMsg::Fault`](dexitac_protocol::McuMsg::Fault) sent per fault, the fault
-//! added to the telemetry's fault flags. A trip is **latched**: nothing but
-//! [`HostMsg::Disarm`](dexitac_protocol::HostMsg::Disarm) clears it; then
-//! [`HostMsg::Arm`](dexitac_protocol::HostMsg::Arm) is accepted again if no
-//! condition is still present.
+//! Every condition is checked once per control tick (1 ms) on the
+//! *filtered* readings ([`control::filter`]). "Trip" means: state
+//! [`ArmState::Tripped`](dexitac_protocol::ArmState::Tripped), the safe state
+//! above, pump modes reset to off, one
+//! [`McuMsg::Fault`](dexitac_protocol::McuMsg::Fault) sent per new fault
+//! (urgent queue), the fault latched in the telemetry's fault flags. A trip
+//! is **latched** in every state (a condition that appears while disarmed
+//! latches too): [`HostMsg::Disarm`](dexitac_protocol::HostMsg::Disarm) does
+//! not clear it; only [`HostMsg::ClearFaults`](dexitac_protocol::HostMsg::ClearFaults)
+//! naming the fault does, and only once its condition is gone. Arm is
+//! refused while any fault is latched (`Tripped`) or a condition is present
+//! (`Refused`). Detection times are at the defaults of [`Config`].
 //!
-//! | condition | detected when | action | recovery |
+//! | condition | detected when (worst case) | outputs | cleared by |
 //! |---|---|---|---|
-//! | positive tank over limit | reading >= +50 kPa | trip (`PositiveOverLimit`) | Disarm; Arm refused while still >= limit |
-//! | negative tank over limit | reading <= -57 kPa | trip (`NegativeOverLimit`) | Disarm; Arm refused while still <= limit |
-//! | sensor out of range | ADC outside the sensor's output band, or reading outside -100..300 kPa | trip (`PositiveSensor` / `NegativeSensor`) | fix wiring; Disarm; Arm refused while out of range |
-//! | sensor stuck | its pump on and the reading moved less than [`Config::stuck_min_change_pa`] for [`Config::stuck_window_ms`] | trip (`*Sensor`) | Disarm, Arm |
-//! | pump run-time | a pump on without pause for longer than [`Config::pump_max_run_ms`] (leak, dead pump) | trip (`*PumpRunTime`) | Disarm, Arm |
-//! | host silence | armed and no valid frame for [`Config::host_silence_ms`] (default 500 ms) | trip (`HostSilence`) | Disarm, Arm |
+//! | positive / negative tank over limit | filtered reading at or past +50 / -57 kPa for 3 consecutive ticks: <= 19 ms after a step of the true pressure past the limit (16 ms filter + 3 ticks) | trip; the pump stops at once when the filtered reading reaches the limit; valves toward that tank held closed while the condition lasts | `ClearFaults` once the reading is back inside |
+//! | sensor (`*Sensor`) | no valid reading for 3 consecutive ticks (output outside its 10..90 % band by more than 1.5 %, supply outside 4.5..5.5 V, no conversion): 3 ms | trip; the pump stops on the first invalid tick; valves toward that tank held closed | `ClearFaults` once readings are valid |
+//! | pump no rise (`*PumpNoRise`: stuck sensor, dead pump, leak) | pump on for a whole 1 s window and its filtered reading rose less than 1.5 kPa: <= 2.016 s of continuous pumping | trip | `ClearFaults` |
+//! | pump run time (`*PumpRunTime`) | one pump run longer than [`control::DEFAULT_PUMP_MAX_RUN_MS`] (6.855 s = 1.5 x the nominal fill time): 1 tick after | trip | `ClearFaults` |
+//! | host silence | armed and no valid frame for 500 ms: exactly 500 ms | trip | `ClearFaults` |
+//! | clock fallback | crystal not ready within about 30 ms at boot (board) | latched at the first tick; runs on the internal clock | `ClearFaults` |
 //! | frame corrupted (COBS, CRC, length, version) | decoder error | frame dropped, nothing actuated, counted | automatic (next frame) |
 //! | frame malformed / unknown message (CRC ok) | decoder error | [`NackReason::Malformed`](dexitac_protocol::NackReason::Malformed) / `UnknownMessage`, nothing actuated | automatic |
-//! | command not allowed in this state | dispatch | `Nack` (`NotArmed`, `Tripped`, `Refused`), nothing actuated | arm / disarm as the reason says |
-//! | transmit queue full | [`FrameSink::send`] fails | frame dropped, counted ([`LinkStats::tx_dropped`]) | automatic; the host retries on a missing ack |
+//! | command not allowed | dispatch | `Nack` (`NotArmed`, `Tripped`, `Refused`, `GuardBand`, `IntervalTooShort`), nothing actuated | as the reason says |
+//! | transmit queue full | [`FrameSink::send`] fails | telemetry dropped first (own queue); counted in [`LinkStats`] | automatic |
 //! | control loop late | tick later than [`Config::tick_period_ms`] | counted (`loop_overruns` in telemetry) | none needed |
-//! | control loop stalled | independent watchdog not fed (board) | MCU reset -> safe state, `ResetCause::IndependentWatchdog` in the hello reply | host re-arms |
-//! | panic | panic handler (board) | outputs forced to the safe state, then watchdog reset | host re-arms |
+//! | control loop stalled | independent watchdog not fed for 50 ms (board) | MCU reset -> safe state, `ResetCause::IndependentWatchdog` in the hello reply | host re-arms |
+//! | panic, HardFault, interrupt without handler | board handlers | outputs forced low at once, cause recorded in no-init RAM ([`persist`]), watchdog reset; `last_stop` in the hello reply | host re-arms |
 //!
 //! A tank whose sensor gives no reading is reported as
 //! [`NO_READING_PA`](dexitac_protocol::NO_READING_PA) (`i32::MIN`) Pa in
 //! telemetry and fault events (the sensor fault flag says why).
-//!
-//! Over-limit and sensor conditions are also evaluated while disarmed: they
-//! show in the telemetry's fault flags and make `Arm` fail with
-//! [`NackReason::Refused`](dexitac_protocol::NackReason::Refused); the pumps
-//! are off anyway.
 #![no_std]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -70,20 +74,23 @@ extern crate std;
 
 pub mod control;
 pub mod cost_scenario;
+pub mod led;
+pub mod persist;
 pub mod queue;
 pub mod reset;
 pub mod sensor;
 pub mod tank_model;
 
-pub use control::hw::{Clock, PressureSource, Pumps, SensorError, TankReadings, Valves};
-pub use control::{Config, Controller, LinkStats, PumpOutputs};
-pub use queue::{ByteQueue, FrameSink, QueueFull};
+pub use control::hw::{Clock, PressureSource, Pumps, SensorError, Valves};
+pub use control::{Config, Controller, LinkStats, PumpOutputs, TickReport};
+pub use queue::{ByteQueue, FrameSink, Priority, QueueFull, TxQueues};
+pub use sensor::SensorSamples;
 
 use dexitac_protocol::FirmwareVersion;
 
 /// This firmware's version, reported in the hello reply.
 pub const FIRMWARE_VERSION: FirmwareVersion = FirmwareVersion {
     major: 0,
-    minor: 1,
+    minor: 2,
     patch: 0,
 };

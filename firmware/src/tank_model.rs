@@ -11,13 +11,17 @@
 //! - an open inlet moves air from the positive tank into the chamber, an
 //!   open outlet from the chamber into the negative tank, with
 //!   [`TankModelParams::valve_tau_ms`]; the tank changes by the chamber's
-//!   change times the volume ratio (a 5 ml chamber on a 200 ml tank).
+//!   change times the volume ratio (a 5 ml chamber on a 200 ml tank). The
+//!   valves are given as [`ValveLevels`], which *can* have a chamber's inlet
+//!   and outlet open together (a valve still releasing): air then flows from
+//!   the positive tank through the chamber into the negative one.
 //!
 //! Stable for any step `dt_ms <= tau` (each update moves a pressure at most
 //! the whole way to its goal); [`TankModel::advance`] splits longer steps.
 
-use dexitac_protocol::{Chambers, ValveState, CHAMBER_COUNT};
+use dexitac_protocol::{Chambers, CHAMBER_COUNT};
 
+use crate::control::valves::ValveLevels;
 use crate::control::PumpOutputs;
 
 /// Parameters of the [`TankModel`].
@@ -27,8 +31,10 @@ pub struct TankModelParams {
     pub positive_stall_pa: i32,
     /// Stall pressure of the negative pump, in pascal.
     pub negative_stall_pa: i32,
-    /// Time constant of a running pump, in milliseconds.
+    /// Time constant of the running positive pump, in milliseconds.
     pub pump_tau_ms: u32,
+    /// Time constant of the running negative pump, in milliseconds.
+    pub negative_pump_tau_ms: u32,
     /// Time constant of the tanks' leak, in milliseconds.
     pub leak_tau_ms: u32,
     /// Time constant of a chamber filling through an open valve, in milliseconds.
@@ -43,6 +49,7 @@ impl Default for TankModelParams {
             positive_stall_pa: 80_000,
             negative_stall_pa: -85_000,
             pump_tau_ms: 4_000,
+            negative_pump_tau_ms: 4_000,
             leak_tau_ms: 120_000,
             valve_tau_ms: 150,
             tank_to_chamber_volume: 40,
@@ -89,29 +96,40 @@ impl TankModel {
         self.chambers_mpa.get(index).map(|&mpa| to_pa(mpa))
     }
 
-    /// Advances the model by `dt_ms` with the given outputs.
+    /// Advances the model by `dt_ms` with the given outputs (valves open
+    /// exactly as the chamber states say).
     pub fn advance(&mut self, dt_ms: u32, pumps: PumpOutputs, chambers: &Chambers) {
+        self.advance_levels(dt_ms, pumps, ValveLevels::from_chambers(chambers));
+    }
+
+    /// Advances the model by `dt_ms` with the valves physically open as
+    /// `valves` says (inlet and outlet of a chamber may be open together).
+    pub fn advance_levels(&mut self, dt_ms: u32, pumps: PumpOutputs, valves: ValveLevels) {
         let mut left = dt_ms;
         let max_step = self.params.valve_tau_ms.clamp(1, 10);
         while left > 0 {
             let step = left.min(max_step);
-            self.step(step, pumps, chambers);
+            self.step(step, pumps, valves);
             left -= step;
         }
     }
 
-    fn step(&mut self, dt_ms: u32, pumps: PumpOutputs, chambers: &Chambers) {
+    fn step(&mut self, dt_ms: u32, pumps: PumpOutputs, valves: ValveLevels) {
         let p = self.params;
         let ratio = i64::from(p.tank_to_chamber_volume.max(1));
-        for (chamber, state) in self.chambers_mpa.iter_mut().zip(chambers) {
-            let source = match state {
-                ValveState::Hold => continue,
-                ValveState::Inflate => &mut self.positive_mpa,
-                ValveState::Deflate => &mut self.negative_mpa,
-            };
-            let before = *chamber;
-            *chamber = relax(before, *source, dt_ms, p.valve_tau_ms);
-            *source -= (*chamber - before) / ratio;
+        for (i, chamber) in self.chambers_mpa.iter_mut().enumerate() {
+            let bit = 1u8 << i;
+            let sources = [
+                (valves.inlets & bit != 0, &mut self.positive_mpa),
+                (valves.outlets & bit != 0, &mut self.negative_mpa),
+            ];
+            for (open, source) in sources {
+                if open {
+                    let before = *chamber;
+                    *chamber = relax(before, *source, dt_ms, p.valve_tau_ms);
+                    *source -= (*chamber - before) / ratio;
+                }
+            }
         }
         if pumps.positive_on {
             let goal = i64::from(p.positive_stall_pa) * MPA_PER_PA;
@@ -119,7 +137,7 @@ impl TankModel {
         }
         if pumps.negative_on {
             let goal = i64::from(p.negative_stall_pa) * MPA_PER_PA;
-            self.negative_mpa = relax(self.negative_mpa, goal, dt_ms, p.pump_tau_ms);
+            self.negative_mpa = relax(self.negative_mpa, goal, dt_ms, p.negative_pump_tau_ms);
         }
         self.positive_mpa = relax(self.positive_mpa, 0, dt_ms, p.leak_tau_ms);
         self.negative_mpa = relax(self.negative_mpa, 0, dt_ms, p.leak_tau_ms);
@@ -135,6 +153,7 @@ fn to_pa(mpa: i64) -> i32 {
 mod tests {
     use super::*;
     use crate::control::valves::SAFE_CHAMBERS;
+    use dexitac_protocol::ValveState;
 
     fn chambers_strategy() -> impl proptest::strategy::Strategy<Value = Chambers> {
         use proptest::prelude::*;
@@ -169,6 +188,24 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_chamber_open_both_ways_joins_the_tanks() {
+        let mut m = TankModel::new(TankModelParams::default());
+        let on = PumpOutputs {
+            positive_on: true,
+            negative_on: true,
+        };
+        m.advance(3_000, on, &SAFE_CHAMBERS);
+        let (p0, n0) = m.tanks_pa();
+        let both = ValveLevels {
+            inlets: 0xFF,
+            outlets: 0xFF,
+        };
+        m.advance_levels(500, PumpOutputs::OFF, both);
+        let (p1, n1) = m.tanks_pa();
+        assert!(p1 < p0 - 5_000 && n1 > n0 + 5_000, "{p0} {n0} -> {p1} {n1}");
     }
 
     #[test]

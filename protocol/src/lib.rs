@@ -65,10 +65,10 @@ pub use frame::{
 pub use limits::{CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
 pub use message::{
     ArmState, Chambers, Fault, FaultEvent, FaultFlags, FirmwareVersion, HelloReply, HostMsg,
-    LimitError, McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets, Telemetry,
-    ValveState, NO_READING_PA,
+    LastStop, LimitError, McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets,
+    Telemetry, ValveState, NO_READING_PA,
 };
 
 /// Version of this wire protocol. Bump it when any message's layout changes;
 /// each side refuses frames of another version ([`FrameError::WrongVersion`]).
-pub const PROTOCOL_VERSION: u8 = 1;
+pub const PROTOCOL_VERSION: u8 = 2;

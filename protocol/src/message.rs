@@ -182,7 +182,9 @@ pub enum HostMsg {
     /// Close every inlet and outlet: hold the air in all chambers.
     SealAll,
     /// Emergency: open every outlet (deflate all chambers) and stop the pumps.
-    /// Accepted in every state.
+    /// Accepted in every state, except while the negative tank is past its
+    /// limit or has no valid reading ([`NackReason::Refused`]): the outlets
+    /// would expose the chambers to that tank.
     VentAll,
     /// Pump control (needs the MCU armed).
     SetPumps {
@@ -193,11 +195,12 @@ pub enum HostMsg {
     },
     /// Tank pressure targets for [`PumpMode::Regulate`].
     SetTankTargets(TankTargets),
-    /// Arm the MCU: allow valve and pump commands. Refused while a tripped
-    /// state has not been cleared with [`HostMsg::Disarm`].
+    /// Arm the MCU: allow valve and pump commands. Refused
+    /// ([`NackReason::Tripped`]) while any fault is latched, and
+    /// ([`NackReason::Refused`]) while a fault condition is present.
     Arm,
-    /// Disarm: pumps off, all valves sealed; also clears a latched trip so
-    /// that the host may arm again.
+    /// Disarm: pumps off, all valves sealed. Does **not** clear latched
+    /// faults: only [`HostMsg::ClearFaults`] does.
     Disarm,
     /// Telemetry period; 0 stops telemetry.
     SetTelemetryInterval {
@@ -206,6 +209,14 @@ pub enum HostMsg {
     },
     /// Keeps an armed MCU from tripping on host silence (any valid frame does).
     Heartbeat,
+    /// Acknowledge latched faults: clears exactly the named faults. Refused
+    /// ([`NackReason::Refused`], nothing cleared) while the condition of a
+    /// named fault is still present. When no fault stays latched the MCU
+    /// leaves [`ArmState::Tripped`] for [`ArmState::Disarmed`].
+    ClearFaults {
+        /// The faults being acknowledged (a person named them).
+        faults: FaultFlags,
+    },
 }
 
 /// Firmware version, semantic-versioning style.
@@ -256,6 +267,44 @@ pub struct HelloReply {
     pub chamber_count: u8,
     /// Why the MCU last reset.
     pub reset_cause: ResetCause,
+    /// Faults latched now (waiting for [`HostMsg::ClearFaults`]).
+    pub latched_faults: FaultFlags,
+    /// What last stopped the outputs before this boot (kept in no-init RAM
+    /// across the reset).
+    pub last_stop: LastStop,
+    /// The smallest telemetry interval the MCU accepts, in milliseconds
+    /// (from the baud rate and the telemetry frame size).
+    pub min_telemetry_interval_ms: u16,
+}
+
+/// What last forced the outputs safe before the current boot, as recorded
+/// in RAM that survives a reset (not a power loss).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LastStop {
+    /// Nothing recorded (power-on, or the record did not survive).
+    #[default]
+    None,
+    /// The safety loop tripped; the first fault of that trip.
+    Trip {
+        /// The fault.
+        fault: Fault,
+    },
+    /// A panic, at this source line of the firmware.
+    Panic {
+        /// Source line of the panic.
+        line: u32,
+    },
+    /// A HardFault exception at this program counter.
+    HardFault {
+        /// The faulting instruction's address.
+        pc: u32,
+    },
+    /// An interrupt or exception without a handler.
+    UnexpectedInterrupt {
+        /// Its IRQ number (negative: a core exception).
+        irqn: i16,
+    },
 }
 
 /// Why a command was refused.
@@ -269,11 +318,19 @@ pub enum NackReason {
     UnknownMessage,
     /// The command needs the MCU armed.
     NotArmed,
-    /// The MCU is tripped: disarm (clears the trip), then arm.
+    /// Faults are latched: acknowledge them with [`HostMsg::ClearFaults`],
+    /// then arm.
     Tripped,
     /// The command cannot run in the current state (e.g. arm while a fault
-    /// condition is still present).
+    /// condition is still present, vent onto a tank past its limit, clear a
+    /// fault whose condition is present).
     Refused,
+    /// A tank target lies inside the limits but not the firmware's guard
+    /// band (a margin inside each limit).
+    GuardBand,
+    /// A telemetry interval shorter than the line can carry
+    /// ([`HelloReply::min_telemetry_interval_ms`]).
+    IntervalTooShort,
 }
 
 /// The MCU's safety state.
@@ -285,8 +342,8 @@ pub enum ArmState {
     Disarmed,
     /// Valve and pump commands are accepted.
     Armed,
-    /// A fault tripped the safety loop: pumps off, valves in the safe state,
-    /// latched until [`HostMsg::Disarm`].
+    /// A fault is latched: pumps off, valves in the safe state, until every
+    /// latched fault is acknowledged with [`HostMsg::ClearFaults`].
     Tripped,
 }
 
@@ -298,9 +355,9 @@ pub enum Fault {
     PositiveOverLimit,
     /// The negative tank reached [`NEGATIVE_TANK_MIN_PA`].
     NegativeOverLimit,
-    /// The positive tank's sensor reads out of range or is stuck while its pump runs.
+    /// The positive tank's sensor (or its supply) reads out of range.
     PositiveSensor,
-    /// The negative tank's sensor reads out of range or is stuck while its pump runs.
+    /// The negative tank's sensor (or its supply) reads out of range.
     NegativeSensor,
     /// The positive pump ran longer than its run-time limit.
     PositivePumpRunTime,
@@ -308,11 +365,19 @@ pub enum Fault {
     NegativePumpRunTime,
     /// No valid frame from the host within the silence deadline while armed.
     HostSilence,
+    /// The positive pump ran but its tank's reading did not rise: stuck
+    /// sensor, dead pump or a leak.
+    PositivePumpNoRise,
+    /// The negative pump ran but its tank's reading did not fall: stuck
+    /// sensor, dead pump or a leak.
+    NegativePumpNoRise,
+    /// The crystal (HSE) did not start: the MCU runs on its internal clock.
+    ClockFallback,
 }
 
 impl Fault {
     /// Every fault, in wire order.
-    pub const ALL: [Fault; 7] = [
+    pub const ALL: [Fault; 10] = [
         Fault::PositiveOverLimit,
         Fault::NegativeOverLimit,
         Fault::PositiveSensor,
@@ -320,6 +385,9 @@ impl Fault {
         Fault::PositivePumpRunTime,
         Fault::NegativePumpRunTime,
         Fault::HostSilence,
+        Fault::PositivePumpNoRise,
+        Fault::NegativePumpNoRise,
+        Fault::ClockFallback,
     ];
 
     /// This fault's bit in [`FaultFlags`].
@@ -352,6 +420,21 @@ impl FaultFlags {
         self.0 == 0
     }
 
+    /// The faults in both sets.
+    pub const fn union(self, other: FaultFlags) -> FaultFlags {
+        FaultFlags(self.0 | other.0)
+    }
+
+    /// The faults of `self` that are not in `other`.
+    pub const fn without(self, other: FaultFlags) -> FaultFlags {
+        FaultFlags(self.0 & !other.0)
+    }
+
+    /// The faults in both `self` and `other`.
+    pub const fn intersection(self, other: FaultFlags) -> FaultFlags {
+        FaultFlags(self.0 & other.0)
+    }
+
     /// The faults in the set, in wire order.
     pub fn iter(self) -> impl Iterator<Item = Fault> {
         Fault::ALL.into_iter().filter(move |f| self.contains(*f))
@@ -382,7 +465,7 @@ pub struct Telemetry {
     pub negative_pump_on: bool,
     /// The safety state.
     pub state: ArmState,
-    /// Faults seen since the last disarm.
+    /// Faults latched (until [`HostMsg::ClearFaults`]).
     pub faults: FaultFlags,
     /// Control-loop ticks that overran their period since reset.
     pub loop_overruns: u32,
@@ -436,7 +519,7 @@ pub trait Message: Serialize + for<'de> Deserialize<'de> + MaxSize {
 }
 
 impl Message for HostMsg {
-    const VARIANT_COUNT: u8 = 11;
+    const VARIANT_COUNT: u8 = 12;
     const DIRECTION: u8 = b'H';
 }
 

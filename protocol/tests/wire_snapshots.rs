@@ -42,35 +42,41 @@ fn host_snapshots() -> Vec<(HostMsg, &'static str)> {
     chambers[0] = ValveState::Inflate;
     chambers[7] = ValveState::Deflate;
     vec![
-        (HostMsg::Hello, "04 01 02 01 05 c8 77 cc 36 00"),
+        (HostMsg::Hello, "04 02 02 01 05 f1 fe ee 54 00"),
         (
             HostMsg::Ping { nonce: 0xdead_beef },
-            "0e 01 02 01 01 ef fd b6 f5 0d 5f 9d b9 ac 00",
+            "0e 02 02 01 01 ef fd b6 f5 0d 76 91 16 b5 00",
         ),
         (
             HostMsg::SetChambers { chambers },
-            "06 01 02 01 02 01 01 01 01 01 01 06 02 66 84 c4 a7 00",
+            "06 02 02 01 02 01 01 01 01 01 01 06 02 36 f8 56 f4 00",
         ),
-        (HostMsg::SealAll, "09 01 02 01 03 3c 84 9c 25 00"),
-        (HostMsg::VentAll, "09 01 02 01 04 d7 e0 56 f1 00"),
+        (HostMsg::SealAll, "09 02 02 01 03 05 0d be 47 00"),
+        (HostMsg::VentAll, "09 02 02 01 04 ee 69 74 93 00"),
         (
             HostMsg::SetPumps {
                 positive: PumpMode::Regulate,
                 negative: PumpMode::Off,
             },
-            "06 01 02 01 05 01 05 ae 20 ce e5 00",
+            "06 02 02 01 05 01 05 74 eb 72 d1 00",
         ),
         (
             HostMsg::SetTankTargets(targets()),
-            "0f 01 02 01 06 f0 a2 04 ff f0 04 24 c6 a7 54 00",
+            "0f 02 02 01 06 f0 a2 04 ff f0 04 3a 3c b1 0c 00",
         ),
-        (HostMsg::Arm, "09 01 02 01 07 23 13 06 e2 00"),
-        (HostMsg::Disarm, "09 01 02 01 08 07 2f 15 bc 00"),
+        (HostMsg::Arm, "09 02 02 01 07 1a 9a 24 80 00"),
+        (HostMsg::Disarm, "09 02 02 01 08 3e a6 37 de 00"),
         (
             HostMsg::SetTelemetryInterval { interval_ms: 20 },
-            "0a 01 02 01 09 14 92 ea 6d 42 00",
+            "0a 02 02 01 09 14 66 5a 5e 0a 00",
         ),
-        (HostMsg::Heartbeat, "09 01 02 01 0a f0 5f 2e 5d 00"),
+        (HostMsg::Heartbeat, "09 02 02 01 0a c9 d6 0c 3f 00"),
+        (
+            HostMsg::ClearFaults {
+                faults: FaultFlags::NONE.with(Fault::HostSilence),
+            },
+            "0a 02 02 01 0b 40 44 27 a4 bb 00",
+        ),
     ]
 }
 
@@ -89,20 +95,23 @@ fn mcu_snapshots() -> Vec<(McuMsg, &'static str)> {
                 negative_tank_min_pa: NEGATIVE_TANK_MIN_PA,
                 chamber_count: CHAMBER_COUNT as u8,
                 reset_cause: ResetCause::IndependentWatchdog,
+                latched_faults: FaultFlags::NONE.with(Fault::PositiveOverLimit),
+                last_stop: LastStop::Panic { line: 300 },
+                min_telemetry_interval_ms: 8,
             }),
-            "04 01 02 01 02 01 0f 01 02 a0 8d 06 cf fa 06 08 03 ea e9 f6 08 00",
+            "04 02 02 01 02 02 14 01 02 a0 8d 06 cf fa 06 08 03 01 02 ac 02 08 ad 77 7a 37 00",
         ),
-        (McuMsg::Ack { seq: 513 }, "08 01 02 01 01 81 04 4b 03 aa 8a 00"),
+        (McuMsg::Ack { seq: 513 }, "0b 02 02 01 01 81 04 91 cb 16 be 00"),
         (
             McuMsg::Nack {
                 seq: 7,
                 reason: NackReason::Tripped,
             },
-            "0b 01 02 01 02 07 03 18 0f 42 26 00",
+            "0b 02 02 01 02 07 03 c2 c4 fe 12 00",
         ),
         (
             McuMsg::Telemetry(telemetry()),
-            "0e 01 02 01 03 c0 c4 07 88 a3 04 9b f0 04 02 01 01 01 01 02 02 02 01 08 01 40 03 35 e5 c3 99 00",
+            "0e 02 02 01 03 c0 c4 07 88 a3 04 9b f0 04 02 01 01 01 01 02 02 02 01 08 01 40 03 24 69 30 ef 00",
         ),
         (
             McuMsg::Fault(FaultEvent {
@@ -111,7 +120,7 @@ fn mcu_snapshots() -> Vec<(McuMsg, &'static str)> {
                 positive_tank_pa: 50_100,
                 negative_tank_pa: -1_000,
             }),
-            "06 01 02 01 04 2a 0a e8 8e 06 cf 0f 1d c6 e3 cc 00",
+            "06 02 02 01 04 2a 0a e8 8e 06 cf 0f af a8 9d 70 00",
         ),
     ]
 }

@@ -21,7 +21,7 @@
 //!
 //! | event | command |
 //! | --- | --- |
-//! | start | `Disarm` (clears a latched trip), `Arm`, tank targets, both pumps `Regulate`, telemetry on |
+//! | start | `Hello` (refuses to start while the MCU reports latched faults: a person acknowledges them, the host never clears them), `Arm`, tank targets, both pumps `Regulate`, telemetry on |
 //! | tanks charged | `SetChambers`: grasping chambers `Inflate`, others `Hold` (fingers close) |
 //! | [`Command::Seal`] (stable) | `SealAll` |
 //! | [`Command::ReopenInflation`] (disturbance) | `SetChambers`: grasping chambers `Inflate` |
@@ -145,6 +145,15 @@ pub enum RuntimeError {
     /// The MCU restarted during the run (it is disarmed, in its safe state).
     #[error("the MCU reset during the run")]
     McuReset,
+    /// The MCU holds latched faults from an earlier trip: a person must
+    /// acknowledge them (`ClearFaults`) before a run can arm it.
+    #[error("the MCU has latched faults {:?} (last stop {:?}): acknowledge them before running", .faults.iter().collect::<Vec<_>>(), .last_stop)]
+    McuFaultsLatched {
+        /// The latched faults.
+        faults: dexitac_protocol::FaultFlags,
+        /// What stopped the outputs before the MCU's last boot.
+        last_stop: dexitac_protocol::LastStop,
+    },
     /// A sensor thread failed.
     #[error("sensor {sensor}: {reason}")]
     Sensor {
@@ -318,9 +327,14 @@ impl<P: Port> Control<'_, P> {
     }
 
     fn setup(&mut self) -> Result<(), RuntimeError> {
-        self.link.hello()?;
-        self.link.command(HostMsg::Disarm)?;
-        self.link.command(HostMsg::Arm)?;
+        let hello = self.link.hello()?;
+        if !hello.latched_faults.is_empty() {
+            return Err(RuntimeError::McuFaultsLatched {
+                faults: hello.latched_faults,
+                last_stop: hello.last_stop,
+            });
+        }
+        self.arm()?;
         let (pos, neg) = self.config.tank_targets_pa;
         let targets =
             TankTargets::new(pos, neg).map_err(|e| RuntimeError::Config(e.to_string()))?;
@@ -339,6 +353,22 @@ impl<P: Port> Control<'_, P> {
         self.stage = Stage::Charging {
             since_ms: self.clock.now_ms(),
         };
+        Ok(())
+    }
+
+    /// Arms the MCU; a refusal in the MCU's first milliseconds (its sensors
+    /// are zeroed then) is retried a few times.
+    fn arm(&mut self) -> Result<(), RuntimeError> {
+        const ATTEMPTS: u32 = 5;
+        for attempt in 1..=ATTEMPTS {
+            match self.link.command(HostMsg::Arm) {
+                Err(LinkError::Nack {
+                    reason: NackReason::Refused,
+                    ..
+                }) if attempt < ATTEMPTS => std::thread::sleep(Duration::from_millis(20)),
+                other => return Ok(other?),
+            }
+        }
         Ok(())
     }
 

@@ -23,10 +23,11 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use dexitac_firmware::sensor::{SensorSamples, NOMINAL_FRONT_END, OVERSAMPLE};
 use dexitac_firmware::tank_model::{TankModel, TankModelParams};
 use dexitac_firmware::{
-    Clock, Config, Controller, FrameSink, PressureSource, PumpOutputs, Pumps, QueueFull,
-    TankReadings, Valves,
+    Clock, Config, Controller, FrameSink, PressureSource, Priority, PumpOutputs, Pumps, QueueFull,
+    Valves,
 };
 use dexitac_protocol::{ArmState, Chambers, FaultFlags, ResetCause, ValveState, CHAMBER_COUNT};
 use serialport::{SerialPort, TTYPort};
@@ -83,7 +84,7 @@ pub struct McuSnapshot {
     pub chambers_pa: [i32; CHAMBER_COUNT],
     /// Safety state.
     pub state: ArmState,
-    /// Faults since the last disarm.
+    /// Latched faults (until `ClearFaults`).
     pub faults: FaultFlags,
     /// Frames the controller accepted.
     pub frames_ok: u32,
@@ -106,12 +107,20 @@ impl Clock for SimHw {
     }
 }
 
+/// The simulated sensors' supply and the ADC reference, mV (nominal).
+const SENSOR_SUPPLY_MV: u32 = 5_000;
+const ADC_REFERENCE_MV: u32 = 3_300;
+
 impl PressureSource for SimHw {
-    fn read_tanks(&mut self) -> TankReadings {
+    fn read_samples(&mut self) -> SensorSamples {
         let (positive_pa, negative_pa) = self.model.tanks_pa();
-        TankReadings {
-            positive_pa: Ok(positive_pa),
-            negative_pa: Ok(negative_pa),
+        let fe = NOMINAL_FRONT_END;
+        let counts =
+            |pa| Ok([fe.sensor_counts(pa, SENSOR_SUPPLY_MV, ADC_REFERENCE_MV); OVERSAMPLE]);
+        SensorSamples {
+            positive: counts(positive_pa),
+            negative: counts(negative_pa),
+            supply: Ok([fe.supply_counts(SENSOR_SUPPLY_MV, ADC_REFERENCE_MV); OVERSAMPLE]),
         }
     }
 }
@@ -133,7 +142,8 @@ impl Pumps for SimHw {
 struct TxBuffer(Vec<u8>);
 
 impl FrameSink for TxBuffer {
-    fn send(&mut self, frame: &[u8]) -> Result<(), QueueFull> {
+    /// Unbounded: every frame is kept, in order, whatever its priority.
+    fn send(&mut self, frame: &[u8], _priority: Priority) -> Result<(), QueueFull> {
         self.0.extend_from_slice(frame);
         Ok(())
     }

@@ -15,6 +15,13 @@ use serialport::{SerialPort, TTYPort};
 
 fn connect() -> (SimMcu, SerialLink) {
     let mcu = SimMcu::spawn(SimMcuConfig::default()).expect("simulated MCU");
+    // The firmware zeroes its sensors in its first milliseconds and refuses
+    // to arm until then.
+    let booted = dexitac_firmware::control::ZERO_AT_TICK as u64 + 1;
+    let until = Instant::now() + Duration::from_secs(2);
+    while mcu.snapshot().time_ms <= booted && Instant::now() < until {
+        thread::sleep(Duration::from_millis(1));
+    }
     let link = Link::open(mcu.port_path(), LinkConfig::default()).expect("open pty");
     (mcu, link)
 }
@@ -220,6 +227,9 @@ fn another_protocol_version_is_a_clear_error() {
                     negative_tank_min_pa: NEGATIVE_TANK_MIN_PA,
                     chamber_count: CHAMBER_COUNT as u8,
                     reset_cause: ResetCause::PowerOn,
+                    latched_faults: Default::default(),
+                    last_stop: Default::default(),
+                    min_telemetry_interval_ms: 8,
                 });
                 device
                     .write_all(&EncodedFrame::new(0, &reply).expect("fits"))

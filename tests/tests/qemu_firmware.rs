@@ -5,8 +5,10 @@
 //! cargo's build lock), boots it on `qemu-system-arm -M stm32vldiscovery`
 //! with USART1 on a pseudo-terminal, and checks from the host side: hello,
 //! ping, arm, set chambers, the telemetry stream, a malformed and a
-//! corrupted frame (nothing actuated), and host silence -> tripped within
-//! the deadline.
+//! corrupted frame (nothing actuated), the guard band and the telemetry
+//! minimum, host silence -> tripped within the deadline, and the latch:
+//! disarm does not clear it, the hello reply reports it, `ClearFaults`
+//! naming it does.
 //!
 //! Skips (with a message) when `qemu-system-arm` is not installed, unless
 //! `DEXITAC_REQUIRE_QEMU=1`, which turns the skip into a failure (CI).
@@ -20,9 +22,9 @@ use std::time::{Duration, Instant};
 
 use crc::{Crc, CRC_32_ISCSI};
 use dexitac_protocol::{
-    ArmState, Decoder, EncodedFrame, Fault, FaultEvent, HostMsg, McuMsg, Message, NackReason,
-    PumpMode, ResetCause, Telemetry, ValveState, CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA,
-    POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
+    ArmState, Decoder, EncodedFrame, Fault, FaultEvent, FaultFlags, HelloReply, HostMsg, LastStop,
+    McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets, Telemetry, ValveState,
+    CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
 };
 use serialport::TTYPort;
 
@@ -246,6 +248,18 @@ impl Host {
         assert_eq!(self.request(msg), McuMsg::Ack { seq }, "{msg:?}");
     }
 
+    fn nack(&mut self, msg: HostMsg, reason: NackReason) {
+        let seq = self.seq.wrapping_add(1);
+        assert_eq!(self.request(msg), McuMsg::Nack { seq, reason }, "{msg:?}");
+    }
+
+    fn hello(&mut self) -> HelloReply {
+        match self.request(HostMsg::Hello) {
+            McuMsg::HelloReply(h) => h,
+            other => panic!("hello answered with {other:?}"),
+        }
+    }
+
     /// Keeps the link alive with heartbeats every 100 ms for `wait`.
     fn keep_alive(&mut self, wait: Duration) {
         let until = Instant::now() + wait;
@@ -300,6 +314,14 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     assert_eq!(usize::from(hello.chamber_count), CHAMBER_COUNT);
     // QEMU does not model RCC_CSR: no reset flag.
     assert_eq!(hello.reset_cause, ResetCause::Unknown);
+    // A fresh boot: nothing latched, no record of an earlier stop (QEMU's
+    // RAM starts zeroed, which is no valid record).
+    assert_eq!(hello.latched_faults, FaultFlags::NONE);
+    assert_eq!(hello.last_stop, LastStop::None);
+    assert_eq!(
+        hello.min_telemetry_interval_ms,
+        dexitac_firmware::control::min_telemetry_interval_ms(115_200)
+    );
 
     host.ack(HostMsg::Ping { nonce: 0xD3C1 });
 
@@ -314,6 +336,21 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
             seq,
             reason: NackReason::NotArmed
         }
+    );
+
+    // Telemetry faster than the line carries, and targets inside the limits
+    // but outside the guard band, are refused.
+    host.nack(
+        HostMsg::SetTelemetryInterval {
+            interval_ms: hello.min_telemetry_interval_ms - 1,
+        },
+        NackReason::IntervalTooShort,
+    );
+    host.nack(
+        HostMsg::SetTankTargets(
+            TankTargets::new(POSITIVE_TANK_MAX_PA, -10_000).expect("inside the limits"),
+        ),
+        NackReason::GuardBand,
     );
 
     // Arm, regulate both pumps, set the chambers; stream telemetry.
@@ -455,16 +492,19 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     assert!(!t.positive_pump_on && !t.negative_pump_on);
     assert_eq!(t.chambers, [ValveState::Hold; CHAMBER_COUNT]);
 
-    // Latched: arm is refused until a disarm.
-    let seq = host.seq.wrapping_add(1);
-    assert_eq!(
-        host.request(HostMsg::Arm),
-        McuMsg::Nack {
-            seq,
-            reason: NackReason::Tripped
-        }
-    );
+    // Latched: arm is refused, disarm does not clear the trip, the hello
+    // reply reports it; only ClearFaults naming the fault does.
+    host.nack(HostMsg::Arm, NackReason::Tripped);
     host.ack(HostMsg::Disarm);
+    host.nack(HostMsg::Arm, NackReason::Tripped);
+    let latched = FaultFlags::NONE.with(Fault::HostSilence);
+    assert_eq!(host.hello().latched_faults, latched);
+    host.ack(HostMsg::ClearFaults {
+        faults: FaultFlags::NONE.with(Fault::PositiveOverLimit),
+    });
+    host.nack(HostMsg::Arm, NackReason::Tripped);
+    host.ack(HostMsg::ClearFaults { faults: latched });
+    assert_eq!(host.hello().latched_faults, FaultFlags::NONE);
     host.ack(HostMsg::Arm);
     host.ack(HostMsg::Disarm);
     eprintln!(

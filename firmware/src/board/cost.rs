@@ -1,8 +1,9 @@
 //! QEMU instruction count of one control step (feature `qemu-cost`).
 //!
 //! Runs the host benchmark's scenario (`benches/step_cost.rs`) on the
-//! emulated Cortex-M3 without a host: arm, both pumps regulating, chamber 0
-//! inflating, telemetry every 10 ms, a heartbeat frame every 100 ms. Around
+//! emulated Cortex-M3 without a host: after the boot-time zero, arm, both
+//! pumps regulating, chamber 0 inflating, telemetry every 10 ms, a
+//! heartbeat frame every 100 ms. Around
 //! each step (`receive` + `tick`) it reads the SysTick counter. Run QEMU with
 //! `-icount shift=0`: every instruction then takes exactly 1 ns of virtual
 //! time, and SysTick counts at the core clock ([`super::QEMU_CORE_CLOCK_HZ`]),
@@ -16,6 +17,7 @@
 use cortex_m::peripheral::SYST;
 use cortex_m_semihosting::debug::{exit, EXIT_SUCCESS};
 use cortex_m_semihosting::hprintln;
+use dexitac_firmware::control::ZERO_AT_TICK;
 use dexitac_firmware::{Clock, Controller, FrameSink};
 use dexitac_protocol::{EncodedFrame, HostMsg};
 
@@ -76,30 +78,39 @@ fn frame(seq: u16, msg: HostMsg) -> Option<EncodedFrame> {
 }
 
 impl Meter {
-    /// Sends the scenario's setup commands to `controller`.
-    pub fn new(controller: &mut Controller, clock: &impl Clock, tx: &mut impl FrameSink) -> Meter {
-        let mut seq = 0;
-        for msg in dexitac_firmware::cost_scenario::setup_commands() {
-            seq += 1;
-            if let Some(f) = frame(seq, msg) {
-                controller.receive(&f, clock, tx);
-            }
-        }
+    /// No steps measured yet.
+    pub fn new() -> Meter {
         Meter {
             sum_counts: 0,
             max_counts: 0,
             steps: 0,
-            seq,
+            seq: 0,
         }
     }
 
-    /// The heartbeat frame to feed at `now_ms`, if one is due.
-    pub fn scripted_input(&mut self, now_ms: u32) -> Option<EncodedFrame> {
-        if now_ms % 100 != 0 {
-            return None;
+    /// Feeds the scripted input due at `now_ms`: the scenario's setup
+    /// commands once the sensors are zeroed, then a heartbeat every 100 ms.
+    pub fn script(
+        &mut self,
+        now_ms: u32,
+        controller: &mut Controller,
+        clock: &impl Clock,
+        tx: &mut impl FrameSink,
+    ) {
+        if now_ms == ZERO_AT_TICK + 2 {
+            for msg in dexitac_firmware::cost_scenario::setup_commands() {
+                self.seq = self.seq.wrapping_add(1);
+                if let Some(f) = frame(self.seq, msg) {
+                    controller.receive(&f, clock, tx);
+                }
+            }
         }
-        self.seq = self.seq.wrapping_add(1);
-        frame(self.seq, HostMsg::Heartbeat)
+        if now_ms % 100 == 0 {
+            self.seq = self.seq.wrapping_add(1);
+            if let Some(f) = frame(self.seq, HostMsg::Heartbeat) {
+                controller.receive(&f, clock, tx);
+            }
+        }
     }
 
     /// Records a step that started at SysTick value `start`; reports and

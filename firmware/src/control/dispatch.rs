@@ -2,14 +2,17 @@
 //! state and the reply ([`McuMsg::Ack`], [`McuMsg::Nack`] or
 //! [`McuMsg::HelloReply`]).
 //!
-//! | command | disarmed | armed | tripped |
+//! | command | disarmed | armed | tripped (faults latched) |
 //! |---|---|---|---|
-//! | `Hello`, `Ping`, `Heartbeat`, `SetTelemetryInterval`, `SetTankTargets` | ack | ack | ack |
+//! | `Hello`, `Ping`, `Heartbeat` | ack | ack | ack |
+//! | `SetTelemetryInterval` | ack; nack `IntervalTooShort` below the link's minimum (0 = off is fine) | same | same |
+//! | `SetTankTargets` | ack; nack `GuardBand` unless both targets keep the guard band inside the limits | same | same |
 //! | `SealAll` (all valves closed) | ack | ack | ack |
-//! | `VentAll` (all outlets open, pump modes off) | ack | ack | ack |
+//! | `VentAll` (all outlets open, pump modes off) | ack; nack `Refused` while the negative tank is past its limit or has no valid reading | same | same |
 //! | `SetChambers`, `SetPumps` | nack `NotArmed` | ack | nack `Tripped` |
-//! | `Arm` | ack if no fault condition is present, else nack `Refused` | ack | nack `Tripped` |
-//! | `Disarm` (safe state, clears the latched trip and the fault flags) | ack | ack | ack |
+//! | `Arm` | ack, unless a fault condition is present or the sensors are not zeroed yet: nack `Refused` | ack | nack `Tripped` |
+//! | `Disarm` (pumps off, valves sealed; faults stay latched) | ack | ack -> disarmed | ack, stays tripped |
+//! | `ClearFaults { faults }` | ack | ack | clears the named faults; nack `Refused` (nothing cleared) while a named fault's condition is present; with no fault left -> disarmed |
 //!
 //! A refused command changes nothing.
 
@@ -42,14 +45,25 @@ fn apply(ctl: &mut Controller, msg: HostMsg, now_ms: u32) -> Result<Reply, NackR
         HostMsg::Hello => return Ok(Reply::Hello),
         HostMsg::Ping { .. } | HostMsg::Heartbeat => {}
         HostMsg::SetTelemetryInterval { interval_ms } => {
+            if interval_ms != 0 && interval_ms < ctl.config.min_telemetry_interval_ms() {
+                return Err(NackReason::IntervalTooShort);
+            }
             ctl.telemetry_interval_ms = interval_ms;
             // The first report goes out at the next tick and starts the
             // cadence there (a gap of two intervals restarts it).
             ctl.last_telemetry_ms = now_ms.wrapping_sub(2 * u32::from(interval_ms));
         }
-        HostMsg::SetTankTargets(targets) => ctl.targets = targets,
+        HostMsg::SetTankTargets(targets) => {
+            if !ctl.config.targets_inside_guard_band(targets) {
+                return Err(NackReason::GuardBand);
+            }
+            ctl.targets = targets;
+        }
         HostMsg::SealAll => ctl.chambers = SAFE_CHAMBERS,
         HostMsg::VentAll => {
+            if !ctl.negative_tank_usable() {
+                return Err(NackReason::Refused);
+            }
             ctl.chambers = VENT_CHAMBERS;
             ctl.positive_mode = PumpMode::Off;
             ctl.negative_mode = PumpMode::Off;
@@ -65,10 +79,12 @@ fn apply(ctl: &mut Controller, msg: HostMsg, now_ms: u32) -> Result<Reply, NackR
         }
         HostMsg::Arm => arm(ctl)?,
         HostMsg::Disarm => {
-            ctl.state = ArmState::Disarmed;
+            if ctl.state == ArmState::Armed {
+                ctl.state = ArmState::Disarmed;
+            }
             ctl.enter_safe_state();
-            ctl.faults = FaultFlags::NONE;
         }
+        HostMsg::ClearFaults { faults } => clear_faults(ctl, faults)?,
     }
     Ok(Reply::Ack)
 }
@@ -85,12 +101,24 @@ fn arm(ctl: &mut Controller) -> Result<(), NackReason> {
     match ctl.state {
         ArmState::Armed => Ok(()),
         ArmState::Tripped => Err(NackReason::Tripped),
-        ArmState::Disarmed if !ctl.present.is_empty() => Err(NackReason::Refused),
+        ArmState::Disarmed if !ctl.present.is_empty() || !ctl.zeroed() => Err(NackReason::Refused),
         ArmState::Disarmed => {
             ctl.state = ArmState::Armed;
             Ok(())
         }
     }
+}
+
+/// Clears the named faults, unless one of them is still present.
+fn clear_faults(ctl: &mut Controller, faults: FaultFlags) -> Result<(), NackReason> {
+    if !faults.intersection(ctl.present).is_empty() {
+        return Err(NackReason::Refused);
+    }
+    ctl.faults = ctl.faults.without(faults);
+    if ctl.state == ArmState::Tripped && ctl.faults.is_empty() {
+        ctl.state = ArmState::Disarmed;
+    }
+    Ok(())
 }
 
 fn hello_reply(ctl: &Controller) -> HelloReply {
@@ -102,5 +130,8 @@ fn hello_reply(ctl: &Controller) -> HelloReply {
         // CHAMBER_COUNT is 8 (protocol crate), which fits a u8.
         chamber_count: CHAMBER_COUNT as u8,
         reset_cause: ctl.reset_cause,
+        latched_faults: ctl.faults,
+        last_stop: ctl.last_stop,
+        min_telemetry_interval_ms: ctl.config.min_telemetry_interval_ms(),
     }
 }

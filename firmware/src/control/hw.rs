@@ -2,12 +2,15 @@
 //!
 //! The board layer implements them with stm32f1xx-hal (GPIO, ADC, SysTick),
 //! the QEMU build with a [`crate::tank_model::TankModel`], the tests with
-//! fakes. Pressures are gauge pressures in whole pascal, times are
-//! milliseconds since reset (wrapping `u32`).
+//! fakes. The pressure source delivers raw ADC conversions
+//! ([`SensorSamples`]); the core converts, corrects and filters them
+//! ([`crate::sensor`], [`super::filter`]). Times are milliseconds since reset
+//! (wrapping `u32`).
 
 use dexitac_protocol::Chambers;
 
 use super::PumpOutputs;
+pub use crate::sensor::SensorSamples;
 
 /// Why a pressure sensor gave no usable reading.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -28,27 +31,22 @@ impl core::fmt::Display for SensorError {
     }
 }
 
-/// One reading of both tank sensors, in pascal (gauge).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct TankReadings {
-    /// The positive (pressure) tank.
-    pub positive_pa: Result<i32, SensorError>,
-    /// The negative (vacuum) tank.
-    pub negative_pa: Result<i32, SensorError>,
-}
-
-/// The tank pressure sensors.
+/// The tank pressure sensors and their supply.
 pub trait PressureSource {
-    /// Reads both tanks now. Called once per control tick.
-    fn read_tanks(&mut self) -> TankReadings;
+    /// Converts every analog input [`crate::sensor::OVERSAMPLE`] times.
+    /// Called once per control tick.
+    fn read_samples(&mut self) -> SensorSamples;
 }
 
 /// The 16 chamber valves (8 inlets, 8 outlets).
 ///
 /// A chamber's state is a [`dexitac_protocol::ValveState`], which has no
-/// value for "inlet and outlet open", so an implementation cannot be asked
-/// to short the tanks. Implementations should switch break-before-make:
-/// [`crate::control::valves::ValveLevels::transition`] gives the order.
+/// value for "inlet and outlet open". The controller changes a chamber
+/// between inflate and deflate only through [`dexitac_protocol::ValveState::Hold`]
+/// held for the valve dead time ([`crate::control::valves::ValveDriver`]), so
+/// a valve that releases late cannot join the tanks either. Implementations
+/// should still write closing valves before opening ones
+/// ([`crate::control::valves::ValveLevels::transition`]).
 pub trait Valves {
     /// Drives every chamber's valve pair to `chambers`. Called once per
     /// control tick with the full state (idempotent).

@@ -1,4 +1,4 @@
-//! The safety loop: host commands and tank readings in, valve and pump
+//! The safety loop: host commands and sensor samples in, valve and pump
 //! outputs, acks and telemetry out.
 //!
 //! A [`Controller`] is driven by two calls, both non-blocking:
@@ -7,42 +7,51 @@
 //!   decoded ([`dexitac_protocol::Decoder`]), dispatched ([`dispatch`]) and
 //!   answered with an ack, a nack or a hello reply. Commands change the
 //!   *desired* state only.
-//! - [`Controller::tick`] once per control period (1 ms): reads the tanks,
-//!   evaluates every trip condition ([`safety`]), regulates the pumps
-//!   ([`pumps`]), writes the valve and pump outputs, and sends fault events
-//!   and telemetry.
+//! - [`Controller::tick`] once per control period (1 ms): converts and
+//!   filters the sensor samples ([`crate::sensor`], [`filter`]), evaluates
+//!   every trip condition ([`safety`]), regulates the pumps ([`pumps`]),
+//!   drives the valves through their dead time ([`valves::ValveDriver`]),
+//!   writes the outputs, and sends fault events and telemetry.
 //!
 //! The outputs are written only by `tick`, so a command takes effect at the
-//! next tick (at most one period later), after the safety checks of that
-//! tick. Pumps only run while armed.
+//! next tick (at most one period later, plus the valve dead time when a
+//! chamber changes sides), after the safety checks of that tick. Pumps only
+//! run while armed.
 //!
 //! ```
-//! use dexitac_firmware::{ByteQueue, Config, Controller, Clock, PressureSource, Pumps,
-//!     PumpOutputs, TankReadings, Valves};
+//! use dexitac_firmware::{Clock, Config, Controller, PressureSource, Pumps, PumpOutputs,
+//!     TxQueues, Valves};
+//! use dexitac_firmware::sensor::{SensorSamples, NOMINAL_FRONT_END, OVERSAMPLE};
 //! use dexitac_protocol::{ArmState, Chambers, EncodedFrame, HostMsg, ResetCause};
 //!
 //! struct Rig { now_ms: u32 }
 //! impl Clock for Rig { fn now_ms(&self) -> u32 { self.now_ms } }
 //! impl PressureSource for Rig {
-//!     fn read_tanks(&mut self) -> TankReadings {
-//!         TankReadings { positive_pa: Ok(0), negative_pa: Ok(0) }
+//!     fn read_samples(&mut self) -> SensorSamples {
+//!         // Both tanks at atmosphere, 5 V supply, 3.3 V reference.
+//!         let fe = NOMINAL_FRONT_END;
+//!         let tank = Ok([fe.sensor_counts(0, 5_000, 3_300); OVERSAMPLE]);
+//!         let supply = Ok([fe.supply_counts(5_000, 3_300); OVERSAMPLE]);
+//!         SensorSamples { positive: tank, negative: tank, supply }
 //!     }
 //! }
 //! impl Valves for Rig { fn set_chambers(&mut self, _: &Chambers) {} }
 //! impl Pumps for Rig { fn set_pumps(&mut self, _: PumpOutputs) {} }
 //!
 //! let mut rig = Rig { now_ms: 0 };
-//! let mut tx = ByteQueue::<512>::new();
+//! let mut tx = TxQueues::<512, 128>::new();
 //! let mut ctl = Controller::new(Config::default(), ResetCause::PowerOn);
+//! // The sensors are zeroed in the first ticks; arm after that.
+//! for _ in 0..100 { rig.now_ms += 1; ctl.tick(&mut rig, &mut tx); }
 //! ctl.receive(&EncodedFrame::new(1, &HostMsg::Arm).unwrap(), &rig, &mut tx);
-//! ctl.tick(&mut rig, &mut tx);
 //! assert_eq!(ctl.state(), ArmState::Armed);
-//! // The host falls silent: tripped after 500 ms.
+//! // The host falls silent: tripped after 500 ms, and latched.
 //! for _ in 0..500 { rig.now_ms += 1; ctl.tick(&mut rig, &mut tx); }
 //! assert_eq!(ctl.state(), ArmState::Tripped);
 //! ```
 
 pub mod dispatch;
+pub mod filter;
 pub mod hw;
 pub mod pumps;
 pub mod safety;
@@ -50,14 +59,16 @@ pub mod valves;
 
 use dexitac_protocol::{
     ArmState, Chambers, Decoder, EncodedFrame, Fault, FaultEvent, FaultFlags, FrameError, HostMsg,
-    McuMsg, NackReason, PumpMode, ResetCause, TankTargets, Telemetry,
+    LastStop, McuMsg, NackReason, PumpMode, ResetCause, TankTargets, Telemetry, ValveState,
+    MAX_FRAME_LEN,
 };
 
-use crate::queue::FrameSink;
-use hw::{Clock, PressureSource, Pumps, TankReadings, Valves};
+use crate::queue::{FrameSink, Priority};
+use crate::sensor::{FrontEnd, NOMINAL_FRONT_END};
+use hw::{Clock, PressureSource, Pumps, SensorError, Valves};
 use pumps::{MonitorLimits, PumpMonitor, Tank};
-use safety::{tank_conditions, valid_reading};
-use valves::SAFE_CHAMBERS;
+use safety::{valid_reading, TankChannel};
+use valves::{ValveDriver, SAFE_CHAMBERS};
 
 /// Run-time tunables of the safety loop. The hard tank limits are not
 /// here: they are compile-time constants of the protocol crate.
@@ -73,13 +84,26 @@ pub struct Config {
     pub pump_hysteresis_pa: i32,
     /// Longest continuous pump run, in milliseconds.
     pub pump_max_run_ms: u32,
-    /// A running pump's sensor must move by [`Config::stuck_min_change_pa`]
-    /// within this time, in milliseconds.
-    pub stuck_window_ms: u32,
-    /// Smallest change that counts as the sensor moving, in pascal.
-    pub stuck_min_change_pa: i32,
+    /// Plausibility window: a running pump's tank must rise by
+    /// [`Config::min_rise_pa`] within this time, in milliseconds.
+    pub rise_window_ms: u32,
+    /// Smallest rise of the filtered reading per window while pumping, in pascal.
+    pub min_rise_pa: i32,
     /// Tank targets until the host sets its own.
     pub default_targets: TankTargets,
+    /// Targets must stay this far inside each hard limit, in pascal.
+    pub guard_band_pa: i32,
+    /// A chamber's inlet opens only after its outlet has been commanded
+    /// closed this long, and the reverse, in milliseconds.
+    pub valve_dead_time_ms: u32,
+    /// Consecutive ticks a condition must hold before it trips (filtered
+    /// reading past a limit, no valid reading).
+    pub trip_after_ticks: u32,
+    /// Accepted distance of the boot-time zero reading from the nominal
+    /// zero, in pascal.
+    pub zero_window_pa: i32,
+    /// Baud rate of the host link (for the smallest telemetry interval).
+    pub link_baud: u32,
 }
 
 /// Default control period: 1 ms (1 kHz).
@@ -88,17 +112,59 @@ pub const DEFAULT_TICK_PERIOD_MS: u32 = 1;
 pub const DEFAULT_HOST_SILENCE_MS: u32 = 500;
 /// Default pump hysteresis: 2 kPa.
 pub const DEFAULT_PUMP_HYSTERESIS_PA: i32 = 2_000;
-/// Default pump run-time limit: 15 s (a 200 ml tank fills to the limit in a
-/// few seconds; a pump running longer pumps into a leak).
-pub const DEFAULT_PUMP_MAX_RUN_MS: u32 = 15_000;
-/// Default stuck-sensor window: 1 s.
-pub const DEFAULT_STUCK_WINDOW_MS: u32 = 1_000;
-/// Default smallest sensor movement while pumping: 300 Pa (below the
-/// hysteresis, so a pump topping up its tank always moves it enough).
-pub const DEFAULT_STUCK_MIN_CHANGE_PA: i32 = 300;
-/// Default tank targets: +40 kPa and -45 kPa, inside the limits with margin
-/// for the pressure overshoot after a pump stops.
+/// Time the nominal tank model ([`crate::tank_model::TankModelParams::default`])
+/// takes to pump its slower tank from atmosphere to the hard limit with the
+/// pump running throughout (leak included): -57 kPa at 4.57 s (+50 kPa
+/// takes 4.02 s). Checked against the model by the test
+/// `fill_time_matches_the_tank_model`.
+pub const NOMINAL_FILL_TIME_MS: u32 = 4_570;
+/// Default pump run-time limit: 1.5 x [`NOMINAL_FILL_TIME_MS`]. A pump 30 %
+/// weaker than nominal still reaches the largest target the guard band
+/// allows within it; a pump that runs longer pumps into a leak, or its
+/// sensor reads too low.
+pub const DEFAULT_PUMP_MAX_RUN_MS: u32 = NOMINAL_FILL_TIME_MS * 3 / 2;
+/// Default plausibility window: 1 s.
+pub const DEFAULT_RISE_WINDOW_MS: u32 = 1_000;
+/// Default smallest rise per window: 1.5 kPa. The filtered reading's noise
+/// (sensor noise of ±2 % of full scale, i.e. ±8 kPa per conversion) has a
+/// standard deviation of about 0.35 kPa, 0.5 kPa for a difference of two;
+/// the slowest pump the tests allow (30 % weak, a leak, at the largest
+/// target) still rises more than 4 kPa per second.
+pub const DEFAULT_MIN_RISE_PA: i32 = 1_500;
+/// Default tank targets: +40 kPa and -45 kPa.
 pub const DEFAULT_TARGETS_PA: (i32, i32) = (40_000, -45_000);
+/// Default guard band: 6 kPa (targets at most +44 / -51 kPa). It covers
+/// the boot zero's error ([`DEFAULT_ZERO_WINDOW_PA`]), the filtered noise
+/// and the pump's overshoot while the filter catches up.
+pub const DEFAULT_GUARD_BAND_PA: i32 = 6_000;
+/// Default valve dead time: 30 ms = the 20 ms worst-case release of the
+/// valve class (the paper: the valves respond in more than 10 ms) + 50 %.
+pub const DEFAULT_VALVE_DEAD_TIME_MS: u32 = 30;
+/// Default consecutive ticks before a trip: 3.
+pub const DEFAULT_TRIP_AFTER_TICKS: u32 = 3;
+/// Default accepted boot zero: within ±4 kPa of nominal (a sensor's zero
+/// tolerance, about ±1 % of its 400 kPa span). A reading further away
+/// (tank still pressurised after a reset) keeps the nominal zero.
+pub const DEFAULT_ZERO_WINDOW_PA: i32 = 4_000;
+/// Default link baud rate: 115 200.
+pub const DEFAULT_LINK_BAUD: u32 = 115_200;
+/// Ticks after boot at which the sensors are zeroed: two filter windows.
+pub const ZERO_AT_TICK: u32 = 2 * filter::FILTER_TICKS as u32;
+
+/// The smallest telemetry interval for a link of `baud` (8N1, 10 bits a
+/// byte): twice the line time of the largest frame, so at least half the
+/// line stays free for replies and fault events. 8 ms at 115 200 baud
+/// (a 44-byte frame takes 3.8 ms).
+pub const fn min_telemetry_interval_ms(baud: u32) -> u16 {
+    let bits = 2 * MAX_FRAME_LEN as u64 * 10 * 1_000;
+    let baud = if baud == 0 { 1 } else { baud as u64 };
+    let ms = bits.div_ceil(baud);
+    if ms > u16::MAX as u64 {
+        u16::MAX
+    } else {
+        ms as u16
+    }
+}
 
 impl Default for Config {
     fn default() -> Self {
@@ -107,14 +173,19 @@ impl Default for Config {
             host_silence_ms: DEFAULT_HOST_SILENCE_MS,
             pump_hysteresis_pa: DEFAULT_PUMP_HYSTERESIS_PA,
             pump_max_run_ms: DEFAULT_PUMP_MAX_RUN_MS,
-            stuck_window_ms: DEFAULT_STUCK_WINDOW_MS,
-            stuck_min_change_pa: DEFAULT_STUCK_MIN_CHANGE_PA,
+            rise_window_ms: DEFAULT_RISE_WINDOW_MS,
+            min_rise_pa: DEFAULT_MIN_RISE_PA,
             default_targets: match TankTargets::new(DEFAULT_TARGETS_PA.0, DEFAULT_TARGETS_PA.1) {
                 Ok(t) => t,
                 // Unreachable: the constants lie inside the limits (checked
-                // by the test `default_targets_are_inside_the_limits`).
+                // by the test `default_targets_are_inside_the_guard_band`).
                 Err(_) => TANK_TARGETS_ZERO,
             },
+            guard_band_pa: DEFAULT_GUARD_BAND_PA,
+            valve_dead_time_ms: DEFAULT_VALVE_DEAD_TIME_MS,
+            trip_after_ticks: DEFAULT_TRIP_AFTER_TICKS,
+            zero_window_pa: DEFAULT_ZERO_WINDOW_PA,
+            link_baud: DEFAULT_LINK_BAUD,
         }
     }
 }
@@ -129,9 +200,29 @@ impl Config {
     fn monitor_limits(&self) -> MonitorLimits {
         MonitorLimits {
             max_run_ms: self.pump_max_run_ms,
-            stuck_window_ms: self.stuck_window_ms,
-            stuck_min_change_pa: self.stuck_min_change_pa,
+            rise_window_ms: self.rise_window_ms,
+            min_rise_pa: self.min_rise_pa,
         }
+    }
+
+    /// Whether `targets` keep [`Config::guard_band_pa`] inside both limits.
+    pub fn targets_inside_guard_band(&self, targets: TankTargets) -> bool {
+        [
+            (Tank::Positive, targets.positive_pa()),
+            (Tank::Negative, targets.negative_pa()),
+        ]
+        .iter()
+        .all(|&(tank, target_pa)| {
+            tank.toward_limit_pa(target_pa)
+                <= tank
+                    .toward_limit_pa(tank.limit_pa())
+                    .saturating_sub(self.guard_band_pa)
+        })
+    }
+
+    /// The smallest telemetry interval of this link.
+    pub const fn min_telemetry_interval_ms(&self) -> u16 {
+        min_telemetry_interval_ms(self.link_baud)
     }
 }
 
@@ -160,8 +251,27 @@ pub struct LinkStats {
     /// Byte runs that were not a valid frame (COBS, CRC, length, version,
     /// malformed or unknown message).
     pub frame_errors: u32,
-    /// Outgoing frames dropped because the transmit queue was full.
-    pub tx_dropped: u32,
+    /// Urgent frames (replies, fault events) dropped: their queue was full.
+    pub urgent_dropped: u32,
+    /// Telemetry frames dropped: the line was busy.
+    pub telemetry_dropped: u32,
+}
+
+/// What one [`Controller::tick`] changed that the board must act on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct TickReport {
+    /// Faults latched in this tick (the board records the first across a
+    /// reset, [`crate::persist`]).
+    pub new_faults: FaultFlags,
+}
+
+/// The boot-time zeroing of the sensors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Zero {
+    /// Waiting for [`ZERO_AT_TICK`] ticks of readings.
+    Pending { ticks: u32 },
+    /// Done: the zero offsets are in the front ends.
+    Done,
 }
 
 /// The safety loop. See the [module docs](self) and the fault table in the
@@ -169,19 +279,29 @@ pub struct LinkStats {
 pub struct Controller {
     config: Config,
     reset_cause: ResetCause,
+    last_stop: LastStop,
     decoder: Decoder<HostMsg>,
     state: ArmState,
+    /// Latched faults: set by a condition, cleared only by `ClearFaults`.
     faults: FaultFlags,
     /// Conditions present at the last tick.
     present: FaultFlags,
+    /// Faults reported from outside the core (clock), latched at the next tick.
+    external: FaultFlags,
+    /// The valve states the host asked for.
     chambers: Chambers,
+    valves: ValveDriver,
     positive_mode: PumpMode,
     negative_mode: PumpMode,
     targets: TankTargets,
     pumps: PumpOutputs,
+    positive: TankChannel,
+    negative: TankChannel,
+    positive_front_end: FrontEnd,
+    negative_front_end: FrontEnd,
+    zero: Zero,
     positive_monitor: PumpMonitor,
     negative_monitor: PumpMonitor,
-    last_readings: TankReadings,
     last_frame_ms: u32,
     last_tick_ms: Option<u32>,
     telemetry_interval_ms: u16,
@@ -198,21 +318,25 @@ impl Controller {
         Controller {
             config,
             reset_cause,
+            last_stop: LastStop::None,
             decoder: Decoder::new(),
             state: ArmState::Disarmed,
             faults: FaultFlags::NONE,
             present: FaultFlags::NONE,
+            external: FaultFlags::NONE,
             chambers: SAFE_CHAMBERS,
+            valves: ValveDriver::new(),
             positive_mode: PumpMode::Off,
             negative_mode: PumpMode::Off,
             targets: config.default_targets,
             pumps: PumpOutputs::OFF,
+            positive: TankChannel::new(),
+            negative: TankChannel::new(),
+            positive_front_end: NOMINAL_FRONT_END,
+            negative_front_end: NOMINAL_FRONT_END,
+            zero: Zero::Pending { ticks: 0 },
             positive_monitor: PumpMonitor::default(),
             negative_monitor: PumpMonitor::default(),
-            last_readings: TankReadings {
-                positive_pa: Ok(0),
-                negative_pa: Ok(0),
-            },
             last_frame_ms: 0,
             last_tick_ms: None,
             telemetry_interval_ms: 0,
@@ -223,24 +347,59 @@ impl Controller {
         }
     }
 
+    /// The same controller, reporting `last_stop` (read from the record
+    /// that survived the reset) in its hello reply.
+    pub fn with_last_stop(mut self, last_stop: LastStop) -> Self {
+        self.last_stop = last_stop;
+        self
+    }
+
+    /// Latches `fault` at the next tick (a condition found outside the
+    /// control core, e.g. [`Fault::ClockFallback`]); it trips like any other.
+    pub fn report_fault(&mut self, fault: Fault) {
+        self.external = self.external.with(fault);
+    }
+
     /// The safety state.
     pub fn state(&self) -> ArmState {
         self.state
     }
 
-    /// Faults seen since the last disarm.
+    /// Latched faults (until `ClearFaults`).
     pub fn faults(&self) -> FaultFlags {
         self.faults
     }
 
-    /// The valve state the outputs are driven to (at the next tick).
+    /// Fault conditions present at the last tick.
+    pub fn present(&self) -> FaultFlags {
+        self.present
+    }
+
+    /// The valve states driven at the last tick (after the dead time).
     pub fn chambers(&self) -> Chambers {
-        self.chambers
+        self.valves.driven()
     }
 
     /// The pump outputs written at the last tick.
     pub fn pumps(&self) -> PumpOutputs {
         self.pumps
+    }
+
+    /// The filtered tank readings of the last tick: (positive, negative).
+    pub fn readings(&self) -> (Result<i32, SensorError>, Result<i32, SensorError>) {
+        (self.positive.reading(), self.negative.reading())
+    }
+
+    /// The zero offsets in use, in pascal (positive, negative), once the
+    /// boot-time zeroing is done.
+    pub fn zero_offsets_pa(&self) -> Option<(i32, i32)> {
+        match self.zero {
+            Zero::Done => Some((
+                self.positive_front_end.zero_pa,
+                self.negative_front_end.zero_pa,
+            )),
+            Zero::Pending { .. } => None,
+        }
     }
 
     /// Ticks that came later than the control period.
@@ -270,45 +429,63 @@ impl Controller {
                     self.link.frames_ok = self.link.frames_ok.wrapping_add(1);
                     self.last_frame_ms = clock.now_ms();
                     let reply = dispatch::dispatch(self, frame.seq, frame.msg, clock.now_ms());
-                    self.send(&reply, tx);
+                    self.send(&reply, Priority::Urgent, tx);
                 }
                 Err(error) => {
                     self.link.frame_errors = self.link.frame_errors.wrapping_add(1);
                     if let Some(nack) = nack_for(error) {
-                        self.send(&nack, tx);
+                        self.send(&nack, Priority::Urgent, tx);
                     }
                 }
             }
         }
     }
 
-    /// One control period: read the tanks, check every trip condition,
-    /// regulate the pumps, write the outputs, send fault events and
-    /// telemetry.
-    pub fn tick<H>(&mut self, hw: &mut H, tx: &mut impl FrameSink)
+    /// One control period: convert and filter the sensor samples, check
+    /// every trip condition, regulate the pumps, drive the valves through
+    /// their dead time, write the outputs, send fault events and telemetry.
+    pub fn tick<H>(&mut self, hw: &mut H, tx: &mut impl FrameSink) -> TickReport
     where
         H: Clock + PressureSource + Valves + Pumps,
     {
         let now_ms = hw.now_ms();
         self.count_overrun(now_ms);
-        let readings = hw.read_tanks();
-        self.last_readings = readings;
+        let samples = hw.read_samples();
+        self.positive.update(
+            Tank::Positive,
+            self.positive_front_end
+                .convert(&samples.positive, &samples.supply),
+        );
+        self.negative.update(
+            Tank::Negative,
+            self.negative_front_end
+                .convert(&samples.negative, &samples.supply),
+        );
+        self.zero_if_due();
 
-        let present = self.conditions(readings, now_ms);
+        let present = self.conditions(now_ms);
         self.present = present;
-        self.faults = FaultFlags(self.faults.0 | present.0);
-        if self.state == ArmState::Armed && !present.is_empty() {
-            self.trip();
-            for fault in present.iter() {
+        let new_faults = present.union(self.external).without(self.faults);
+        self.external = FaultFlags::NONE;
+        if !new_faults.is_empty() {
+            self.faults = self.faults.union(new_faults);
+            self.state = ArmState::Tripped;
+            self.enter_safe_state();
+            for fault in new_faults.iter() {
                 self.send_fault(fault, now_ms, tx);
             }
         }
 
-        self.pumps = self.regulate(readings);
-        self.record_pumps(readings, now_ms);
-        hw.set_chambers(&self.chambers);
+        self.pumps = self.regulate();
+        self.record_pumps(now_ms);
+        let desired = close_toward_bad_tanks(self.chambers, present);
+        let driven = self
+            .valves
+            .drive(&desired, now_ms, self.config.valve_dead_time_ms);
+        hw.set_chambers(&driven);
         hw.set_pumps(self.pumps);
         self.send_telemetry_if_due(now_ms, tx);
+        TickReport { new_faults }
     }
 
     fn count_overrun(&mut self, now_ms: u32) {
@@ -320,21 +497,61 @@ impl Controller {
         self.last_tick_ms = Some(now_ms);
     }
 
+    /// Zeroes both sensors once, [`ZERO_AT_TICK`] ticks after boot, on the
+    /// reading of atmosphere (pumps off and valves closed since boot). A
+    /// reading outside [`Config::zero_window_pa`] (or none) keeps the
+    /// nominal zero of 0 Pa.
+    fn zero_if_due(&mut self) {
+        let Zero::Pending { ticks } = self.zero else {
+            return;
+        };
+        if ticks + 1 < ZERO_AT_TICK {
+            self.zero = Zero::Pending { ticks: ticks + 1 };
+            return;
+        }
+        let window = self.config.zero_window_pa;
+        let zero_of = |channel: &TankChannel| {
+            valid_reading(channel.reading())
+                .filter(|pa| pa.abs() <= window && channel.settled())
+                .unwrap_or(0)
+        };
+        self.positive_front_end = NOMINAL_FRONT_END.with_zero_pa(zero_of(&self.positive));
+        self.negative_front_end = NOMINAL_FRONT_END.with_zero_pa(zero_of(&self.negative));
+        self.positive.reset_filter();
+        self.negative.reset_filter();
+        self.zero = Zero::Done;
+    }
+
+    /// Whether the boot-time zeroing is done (arming waits for it).
+    pub fn zeroed(&self) -> bool {
+        self.zero == Zero::Done
+    }
+
     /// Every condition present now (host silence only while armed).
-    fn conditions(&mut self, readings: TankReadings, now_ms: u32) -> FaultFlags {
+    fn conditions(&mut self, now_ms: u32) -> FaultFlags {
         let limits = self.config.monitor_limits();
-        let positive_findings = match valid_reading(readings.positive_pa) {
-            Some(pa) => self.positive_monitor.check(pa, now_ms, &limits),
+        let trip_after = self.config.trip_after_ticks;
+        let positive_findings = match valid_reading(self.positive.reading()) {
+            Some(pa) => {
+                self.positive_monitor
+                    .check(Tank::Positive.toward_limit_pa(pa), now_ms, &limits)
+            }
             None => Default::default(),
         };
-        let negative_findings = match valid_reading(readings.negative_pa) {
-            Some(pa) => self.negative_monitor.check(pa, now_ms, &limits),
+        let negative_findings = match valid_reading(self.negative.reading()) {
+            Some(pa) => {
+                self.negative_monitor
+                    .check(Tank::Negative.toward_limit_pa(pa), now_ms, &limits)
+            }
             None => Default::default(),
         };
-        let mut flags = FaultFlags(
-            tank_conditions(Tank::Positive, readings.positive_pa, positive_findings).0
-                | tank_conditions(Tank::Negative, readings.negative_pa, negative_findings).0,
-        );
+        let mut flags = self
+            .positive
+            .conditions(Tank::Positive, positive_findings, trip_after)
+            .union(
+                self.negative
+                    .conditions(Tank::Negative, negative_findings, trip_after),
+            );
         if self.state == ArmState::Armed
             && now_ms.wrapping_sub(self.last_frame_ms) >= self.config.host_silence_ms
         {
@@ -343,13 +560,7 @@ impl Controller {
         flags
     }
 
-    /// Enters the latched tripped state: pumps off, valves sealed.
-    fn trip(&mut self) {
-        self.state = ArmState::Tripped;
-        self.enter_safe_state();
-    }
-
-    /// Pumps off (modes and outputs), every valve closed.
+    /// Pumps off (modes and outputs), every valve commanded closed.
     fn enter_safe_state(&mut self) {
         self.chambers = SAFE_CHAMBERS;
         self.positive_mode = PumpMode::Off;
@@ -360,12 +571,12 @@ impl Controller {
     }
 
     /// The pump outputs for this tick: off unless armed with a valid reading.
-    fn regulate(&self, readings: TankReadings) -> PumpOutputs {
+    fn regulate(&self) -> PumpOutputs {
         if self.state != ArmState::Armed {
             return PumpOutputs::OFF;
         }
         let hysteresis_pa = self.config.pump_hysteresis_pa;
-        let positive_on = valid_reading(readings.positive_pa).is_some_and(|pa| {
+        let positive_on = valid_reading(self.positive.reading()).is_some_and(|pa| {
             pumps::regulate(
                 Tank::Positive,
                 self.positive_mode,
@@ -375,7 +586,7 @@ impl Controller {
                 hysteresis_pa,
             )
         });
-        let negative_on = valid_reading(readings.negative_pa).is_some_and(|pa| {
+        let negative_on = valid_reading(self.negative.reading()).is_some_and(|pa| {
             pumps::regulate(
                 Tank::Negative,
                 self.negative_mode,
@@ -391,25 +602,32 @@ impl Controller {
         }
     }
 
-    fn record_pumps(&mut self, readings: TankReadings, now_ms: u32) {
-        let positive_pa = valid_reading(readings.positive_pa).unwrap_or(0);
-        let negative_pa = valid_reading(readings.negative_pa).unwrap_or(0);
+    fn record_pumps(&mut self, now_ms: u32) {
+        let toward = |tank: Tank, channel: &TankChannel| {
+            tank.toward_limit_pa(valid_reading(channel.reading()).unwrap_or(0))
+        };
+        let positive = toward(Tank::Positive, &self.positive);
+        let negative = toward(Tank::Negative, &self.negative);
         self.positive_monitor
-            .record(self.pumps.positive_on, positive_pa, now_ms);
+            .record(self.pumps.positive_on, positive, now_ms);
         self.negative_monitor
-            .record(self.pumps.negative_on, negative_pa, now_ms);
+            .record(self.pumps.negative_on, negative, now_ms);
     }
 
     /// Encodes and queues `msg`; a full queue drops it (counted).
-    fn send(&mut self, msg: &McuMsg, tx: &mut impl FrameSink) {
+    fn send(&mut self, msg: &McuMsg, priority: Priority, tx: &mut impl FrameSink) {
         let seq = self.tx_seq;
         self.tx_seq = self.tx_seq.wrapping_add(1);
         let sent = match EncodedFrame::new(seq, msg) {
-            Ok(frame) => tx.send(&frame).is_ok(),
+            Ok(frame) => tx.send(&frame, priority).is_ok(),
             Err(_) => false,
         };
         if !sent {
-            self.link.tx_dropped = self.link.tx_dropped.wrapping_add(1);
+            let counter = match priority {
+                Priority::Urgent => &mut self.link.urgent_dropped,
+                Priority::Telemetry => &mut self.link.telemetry_dropped,
+            };
+            *counter = counter.wrapping_add(1);
         }
     }
 
@@ -420,7 +638,7 @@ impl Controller {
             positive_tank_pa: self.reported_pa(Tank::Positive),
             negative_tank_pa: self.reported_pa(Tank::Negative),
         };
-        self.send(&McuMsg::Fault(event), tx);
+        self.send(&McuMsg::Fault(event), Priority::Urgent, tx);
     }
 
     fn send_telemetry_if_due(&mut self, now_ms: u32, tx: &mut impl FrameSink) {
@@ -437,7 +655,7 @@ impl Controller {
             now_ms
         };
         let telemetry = self.telemetry(now_ms);
-        self.send(&McuMsg::Telemetry(telemetry), tx);
+        self.send(&McuMsg::Telemetry(telemetry), Priority::Telemetry, tx);
     }
 
     /// The state report for `now_ms`.
@@ -446,7 +664,7 @@ impl Controller {
             time_ms: now_ms,
             positive_tank_pa: self.reported_pa(Tank::Positive),
             negative_tank_pa: self.reported_pa(Tank::Negative),
-            chambers: self.chambers,
+            chambers: self.valves.driven(),
             positive_pump_on: self.pumps.positive_on,
             negative_pump_on: self.pumps.negative_on,
             state: self.state,
@@ -455,15 +673,44 @@ impl Controller {
         }
     }
 
-    /// The last reading of `tank`, or [`dexitac_protocol::NO_READING_PA`] when the sensor gave none
-    /// (the sensor fault flag says why).
+    /// The filtered reading of `tank`, or [`dexitac_protocol::NO_READING_PA`]
+    /// when the sensor gave none (the sensor fault flag says why).
     fn reported_pa(&self, tank: Tank) -> i32 {
         let reading = match tank {
-            Tank::Positive => self.last_readings.positive_pa,
-            Tank::Negative => self.last_readings.negative_pa,
+            Tank::Positive => self.positive.reading(),
+            Tank::Negative => self.negative.reading(),
         };
         reading.unwrap_or(dexitac_protocol::NO_READING_PA)
     }
+
+    /// Whether the negative tank may take the chambers' air: a valid
+    /// reading inside its limit, and no over-limit or sensor condition.
+    fn negative_tank_usable(&self) -> bool {
+        let [over_limit, sensor, ..] = safety::faults_of(Tank::Negative);
+        valid_reading(self.negative.reading())
+            .is_some_and(|pa| !Tank::Negative.at_or_past_limit(pa))
+            && !self.present.contains(over_limit)
+            && !self.present.contains(sensor)
+    }
+}
+
+/// `chambers` with every valve toward a tank that shows an over-limit or
+/// sensor condition held closed: no chamber is exposed to a tank past its
+/// limit (or of unknown pressure), whatever was commanded.
+fn close_toward_bad_tanks(mut chambers: Chambers, present: FaultFlags) -> Chambers {
+    let bad = |tank: Tank| {
+        let [over_limit, sensor, ..] = safety::faults_of(tank);
+        present.contains(over_limit) || present.contains(sensor)
+    };
+    let (positive_bad, negative_bad) = (bad(Tank::Positive), bad(Tank::Negative));
+    for state in chambers.iter_mut() {
+        if (positive_bad && *state == ValveState::Inflate)
+            || (negative_bad && *state == ValveState::Deflate)
+        {
+            *state = ValveState::Hold;
+        }
+    }
+    chambers
 }
 
 /// The nack for a frame error, if the frame passed its CRC (its sequence

@@ -72,18 +72,10 @@ pub fn regulate(
 pub struct PumpFindings {
     /// The pump has run without pause for longer than the run-time limit.
     pub run_time_exceeded: bool,
-    /// The pump is running but the sensor reading does not move.
-    pub sensor_stuck: bool,
-}
-
-/// Watches one pump and its sensor while the pump runs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct PumpMonitor {
-    /// When the pump was last switched on, if it is on.
-    on_since_ms: Option<u32>,
-    /// The reading the stuck check compares against, and since when.
-    reference_pa: i32,
-    reference_ms: u32,
+    /// The pump ran for a whole plausibility window and its tank's filtered
+    /// reading did not move toward the limit by the minimum rise: a stuck
+    /// sensor, a dead pump or a leak.
+    pub no_rise: bool,
 }
 
 /// Limits of a [`PumpMonitor`].
@@ -91,37 +83,60 @@ pub struct PumpMonitor {
 pub struct MonitorLimits {
     /// Longest continuous run, in milliseconds.
     pub max_run_ms: u32,
-    /// How long the reading may stay within `stuck_min_change_pa` while the
-    /// pump runs, in milliseconds.
-    pub stuck_window_ms: u32,
-    /// The smallest change of the reading that counts as moving, in pascal.
-    pub stuck_min_change_pa: i32,
+    /// Length of a plausibility window, in milliseconds.
+    pub rise_window_ms: u32,
+    /// Smallest rise (in pumping direction) of the filtered reading over a
+    /// window while the pump runs, in pascal.
+    pub min_rise_pa: i32,
+}
+
+/// Watches one pump and its tank's filtered reading while the pump runs.
+///
+/// The plausibility check compares the reading at the end of each window
+/// with the reading at its start (both filtered), so noise that averages
+/// out cannot reset it, unlike a check that restarts on any small change.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PumpMonitor {
+    /// When the pump was last switched on, if it is on.
+    on_since_ms: Option<u32>,
+    /// Start of the current plausibility window: time and reading in
+    /// pumping direction.
+    window_start_ms: u32,
+    window_start_pa: i32,
 }
 
 impl PumpMonitor {
     /// Checks the period that ends `now_ms`, during which the pump was as
-    /// last reported by [`PumpMonitor::record`].
-    pub fn check(&mut self, pressure_pa: i32, now_ms: u32, limits: &MonitorLimits) -> PumpFindings {
+    /// last reported by [`PumpMonitor::record`]. `toward_limit_pa` is the
+    /// filtered reading in pumping direction ([`Tank::toward_limit_pa`]).
+    pub fn check(
+        &mut self,
+        toward_limit_pa: i32,
+        now_ms: u32,
+        limits: &MonitorLimits,
+    ) -> PumpFindings {
         let Some(on_since_ms) = self.on_since_ms else {
             return PumpFindings::default();
         };
-        if pressure_pa.abs_diff(self.reference_pa) >= limits.stuck_min_change_pa.unsigned_abs() {
-            self.reference_pa = pressure_pa;
-            self.reference_ms = now_ms;
+        let mut no_rise = false;
+        if now_ms.wrapping_sub(self.window_start_ms) >= limits.rise_window_ms {
+            no_rise = toward_limit_pa.saturating_sub(self.window_start_pa) < limits.min_rise_pa;
+            self.window_start_ms = now_ms;
+            self.window_start_pa = toward_limit_pa;
         }
         PumpFindings {
             run_time_exceeded: now_ms.wrapping_sub(on_since_ms) > limits.max_run_ms,
-            sensor_stuck: now_ms.wrapping_sub(self.reference_ms) >= limits.stuck_window_ms,
+            no_rise,
         }
     }
 
     /// Records the pump's state from `now_ms` on.
-    pub fn record(&mut self, on: bool, pressure_pa: i32, now_ms: u32) {
+    pub fn record(&mut self, on: bool, toward_limit_pa: i32, now_ms: u32) {
         match (on, self.on_since_ms) {
             (true, None) => {
                 self.on_since_ms = Some(now_ms);
-                self.reference_pa = pressure_pa;
-                self.reference_ms = now_ms;
+                self.window_start_pa = toward_limit_pa;
+                self.window_start_ms = now_ms;
             }
             (false, Some(_)) => self.on_since_ms = None,
             _ => {}
@@ -140,8 +155,8 @@ mod tests {
 
     const LIMITS: MonitorLimits = MonitorLimits {
         max_run_ms: 1000,
-        stuck_window_ms: 200,
-        stuck_min_change_pa: 100,
+        rise_window_ms: 200,
+        min_rise_pa: 100,
     };
 
     #[test]
@@ -229,20 +244,33 @@ mod tests {
     }
 
     #[test]
-    fn monitor_flags_a_reading_that_does_not_move() {
+    fn monitor_flags_a_reading_that_does_not_rise() {
         let mut m = PumpMonitor::default();
         m.record(true, 1_000, 0);
-        assert!(!m.check(1_050, 199, &LIMITS).sensor_stuck);
-        assert!(m.check(1_050, 200, &LIMITS).sensor_stuck);
+        assert!(!m.check(1_050, 199, &LIMITS).no_rise);
+        assert!(m.check(1_050, 200, &LIMITS).no_rise);
     }
 
     #[test]
-    fn monitor_accepts_a_moving_reading() {
+    fn monitor_is_not_fooled_by_noise_around_a_stuck_value() {
+        // +-80 Pa of noise every tick (below the 100 Pa rise): the old
+        // "reset on any change" check never fired; this one does.
+        let mut m = PumpMonitor::default();
+        m.record(true, 1_000, 0);
+        let flagged = (1..=200u32).any(|t| {
+            let noise = if t % 2 == 0 { 80 } else { -80 };
+            m.check(1_000 + noise, t, &LIMITS).no_rise
+        });
+        assert!(flagged);
+    }
+
+    #[test]
+    fn monitor_accepts_a_rising_reading() {
         let mut m = PumpMonitor::default();
         m.record(true, 1_000, 0);
         for t in 1..=900u32 {
             let p = 1_000 + (t as i32) * 2;
-            assert_eq!(m.check(p, t, &LIMITS), PumpFindings::default());
+            assert!(!m.check(p, t, &LIMITS).no_rise);
         }
     }
 

@@ -1,33 +1,35 @@
-//! Trip conditions: one tank's reading -> the faults it shows.
+//! Trip conditions of one tank: filtered reading and pump findings -> the
+//! faults it shows.
 //!
-//! Input: a [`TankReadings`](super::hw::TankReadings) half (pascal or a [`SensorError`]) and the pump
-//! monitor's findings. Output: [`FaultFlags`]. The hard limits come from the
+//! Input: one tick's pressure of the tank (pascal, or a [`SensorError`]) and
+//! the pump monitor's findings. Output: [`FaultFlags`]. A reading trips only
+//! after [`crate::Config::trip_after_ticks`] consecutive ticks (of the
+//! filtered value past the limit, or of no valid reading), so one noisy
+//! sample or one EMI spike cannot trip. The hard limits come from the
 //! protocol crate at compile time; no command can move them.
 
 use dexitac_protocol::{Fault, FaultFlags};
 
+use super::filter::MovingAverage;
 use super::hw::SensorError;
 use super::pumps::{PumpFindings, Tank};
+pub use crate::sensor::{SENSOR_MAX_PA, SENSOR_MIN_PA};
 
-/// Lowest pressure the tank sensors can measure, in pascal (-100 kPa).
-pub const SENSOR_MIN_PA: i32 = -100_000;
-
-/// Highest pressure the tank sensors can measure, in pascal (+300 kPa).
-pub const SENSOR_MAX_PA: i32 = 300_000;
-
-/// The faults of one tank.
-const fn faults_of(tank: Tank) -> (Fault, Fault, Fault) {
+/// The faults of one tank: over limit, sensor, run time, no rise.
+pub const fn faults_of(tank: Tank) -> [Fault; 4] {
     match tank {
-        Tank::Positive => (
+        Tank::Positive => [
             Fault::PositiveOverLimit,
             Fault::PositiveSensor,
             Fault::PositivePumpRunTime,
-        ),
-        Tank::Negative => (
+            Fault::PositivePumpNoRise,
+        ],
+        Tank::Negative => [
             Fault::NegativeOverLimit,
             Fault::NegativeSensor,
             Fault::NegativePumpRunTime,
-        ),
+            Fault::NegativePumpNoRise,
+        ],
     }
 }
 
@@ -39,27 +41,92 @@ pub fn valid_reading(reading: Result<i32, SensorError>) -> Option<i32> {
         .filter(|pa| (SENSOR_MIN_PA..=SENSOR_MAX_PA).contains(pa))
 }
 
-/// The conditions one tank shows now: sensor fault (no valid reading, or
-/// stuck while its pump runs), over-limit, pump run time.
-pub fn tank_conditions(
-    tank: Tank,
+/// One tank's filtered reading and trip counters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TankChannel {
+    filter: MovingAverage,
     reading: Result<i32, SensorError>,
-    findings: PumpFindings,
-) -> FaultFlags {
-    let (over_limit, sensor, run_time) = faults_of(tank);
-    let mut flags = FaultFlags::NONE;
-    match valid_reading(reading) {
-        None => flags = flags.with(sensor),
-        Some(pa) if tank.at_or_past_limit(pa) => flags = flags.with(over_limit),
-        Some(_) => {}
+    invalid_ticks: u32,
+    over_limit_ticks: u32,
+}
+
+impl Default for TankChannel {
+    fn default() -> Self {
+        Self::new()
     }
-    if findings.sensor_stuck {
-        flags = flags.with(sensor);
+}
+
+impl TankChannel {
+    /// No reading yet (reported as [`SensorError::NoSample`]).
+    pub const fn new() -> Self {
+        TankChannel {
+            filter: MovingAverage::new(),
+            reading: Err(SensorError::NoSample),
+            invalid_ticks: 0,
+            over_limit_ticks: 0,
+        }
     }
-    if findings.run_time_exceeded {
-        flags = flags.with(run_time);
+
+    /// Takes one tick's pressure: a valid one enters the filter, an invalid
+    /// one counts toward the sensor fault (and makes the reading an error,
+    /// so the pump stops at once).
+    pub fn update(&mut self, tank: Tank, raw: Result<i32, SensorError>) {
+        match valid_reading(raw) {
+            Some(pa) => {
+                let filtered = self.filter.push(pa);
+                self.reading = Ok(filtered);
+                self.invalid_ticks = 0;
+                self.over_limit_ticks = if tank.at_or_past_limit(filtered) {
+                    self.over_limit_ticks.saturating_add(1)
+                } else {
+                    0
+                };
+            }
+            None => {
+                self.reading = Err(raw.err().unwrap_or(SensorError::OutOfRange));
+                self.invalid_ticks = self.invalid_ticks.saturating_add(1);
+            }
+        }
     }
-    flags
+
+    /// The filtered reading of the last tick, or why there is none.
+    pub const fn reading(&self) -> Result<i32, SensorError> {
+        self.reading
+    }
+
+    /// Whether the filter holds a full window.
+    pub const fn settled(&self) -> bool {
+        self.filter.is_full()
+    }
+
+    /// Forgets the filter (after a change of the zero offset).
+    pub fn reset_filter(&mut self) {
+        self.filter.reset();
+    }
+
+    /// The conditions this tank shows now.
+    pub fn conditions(
+        &self,
+        tank: Tank,
+        findings: PumpFindings,
+        trip_after_ticks: u32,
+    ) -> FaultFlags {
+        let [over_limit, sensor, run_time, no_rise] = faults_of(tank);
+        let mut flags = FaultFlags::NONE;
+        if self.invalid_ticks >= trip_after_ticks {
+            flags = flags.with(sensor);
+        }
+        if self.over_limit_ticks >= trip_after_ticks {
+            flags = flags.with(over_limit);
+        }
+        if findings.run_time_exceeded {
+            flags = flags.with(run_time);
+        }
+        if findings.no_rise {
+            flags = flags.with(no_rise);
+        }
+        flags
+    }
 }
 
 #[cfg(test)]
@@ -67,37 +134,55 @@ mod tests {
     use super::*;
     use dexitac_protocol::{NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
 
-    #[test]
-    fn reading_at_limit_is_over_limit() {
-        let f = tank_conditions(
-            Tank::Positive,
-            Ok(POSITIVE_TANK_MAX_PA),
-            PumpFindings::default(),
-        );
-        assert!(f.contains(Fault::PositiveOverLimit));
-        let f = tank_conditions(
-            Tank::Negative,
-            Ok(NEGATIVE_TANK_MIN_PA),
-            PumpFindings::default(),
-        );
-        assert!(f.contains(Fault::NegativeOverLimit));
-        let f = tank_conditions(
-            Tank::Negative,
-            Ok(NEGATIVE_TANK_MIN_PA + 1),
-            PumpFindings::default(),
-        );
-        assert!(f.is_empty());
+    fn after(tank: Tank, readings: &[Result<i32, SensorError>]) -> FaultFlags {
+        let mut c = TankChannel::new();
+        for r in readings {
+            c.update(tank, *r);
+        }
+        c.conditions(tank, PumpFindings::default(), 3)
     }
 
     #[test]
-    fn reading_outside_sensor_range_is_sensor_fault() {
-        for reading in [
+    fn reading_at_limit_trips_after_three_ticks() {
+        let at = Ok(POSITIVE_TANK_MAX_PA);
+        assert!(after(Tank::Positive, &[at, at]).is_empty());
+        assert!(after(Tank::Positive, &[at, at, at]).contains(Fault::PositiveOverLimit));
+        let at = Ok(NEGATIVE_TANK_MIN_PA);
+        assert!(after(Tank::Negative, &[at, at, at]).contains(Fault::NegativeOverLimit));
+        let inside = Ok(NEGATIVE_TANK_MIN_PA + 1);
+        assert!(after(Tank::Negative, &[inside; 5]).is_empty());
+    }
+
+    #[test]
+    fn an_interrupted_run_over_the_limit_restarts_the_count() {
+        let (at, below) = (Ok(POSITIVE_TANK_MAX_PA + 20_000), Ok(0));
+        // Filtered: 20 kPa past the limit, then one tick pulls the mean
+        // below it, then two more ticks past: never three in a row.
+        let mut c = TankChannel::new();
+        c.update(Tank::Positive, at);
+        c.update(Tank::Positive, at);
+        assert!(c
+            .conditions(Tank::Positive, PumpFindings::default(), 3)
+            .is_empty());
+        for _ in 0..3 {
+            c.update(Tank::Positive, below);
+        }
+        c.update(Tank::Positive, at);
+        assert!(c
+            .conditions(Tank::Positive, PumpFindings::default(), 3)
+            .is_empty());
+    }
+
+    #[test]
+    fn invalid_readings_trip_after_three_ticks() {
+        for bad in [
             Ok(SENSOR_MAX_PA + 1),
             Ok(SENSOR_MIN_PA - 1),
             Err(SensorError::OutOfRange),
             Err(SensorError::NoSample),
         ] {
-            let f = tank_conditions(Tank::Positive, reading, PumpFindings::default());
+            assert!(after(Tank::Positive, &[bad, bad]).is_empty());
+            let f = after(Tank::Positive, &[bad, bad, bad]);
             assert_eq!(f, FaultFlags::NONE.with(Fault::PositiveSensor));
         }
     }

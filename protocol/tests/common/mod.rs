@@ -39,6 +39,21 @@ pub fn host_msg() -> impl Strategy<Value = HostMsg> {
         Just(HostMsg::Disarm),
         any::<u16>().prop_map(|interval_ms| HostMsg::SetTelemetryInterval { interval_ms }),
         Just(HostMsg::Heartbeat),
+        fault_flags().prop_map(|faults| HostMsg::ClearFaults { faults }),
+    ]
+}
+
+pub fn fault_flags() -> impl Strategy<Value = FaultFlags> {
+    (0u16..(1 << Fault::ALL.len())).prop_map(FaultFlags)
+}
+
+pub fn last_stop() -> impl Strategy<Value = LastStop> {
+    prop_oneof![
+        Just(LastStop::None),
+        fault().prop_map(|fault| LastStop::Trip { fault }),
+        any::<u32>().prop_map(|line| LastStop::Panic { line }),
+        any::<u32>().prop_map(|pc| LastStop::HardFault { pc }),
+        any::<i16>().prop_map(|irqn| LastStop::UnexpectedInterrupt { irqn }),
     ]
 }
 
@@ -61,6 +76,8 @@ pub fn nack_reason() -> impl Strategy<Value = NackReason> {
         Just(NackReason::NotArmed),
         Just(NackReason::Tripped),
         Just(NackReason::Refused),
+        Just(NackReason::GuardBand),
+        Just(NackReason::IntervalTooShort),
     ]
 }
 
@@ -109,10 +126,19 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
             any::<i32>(),
             any::<i32>(),
             any::<u8>(),
-            reset_cause()
+            reset_cause(),
+            (fault_flags(), last_stop(), any::<u16>()),
         )
             .prop_map(
-                |(protocol_version, [major, minor, patch], p, n, c, reset_cause)| {
+                |(
+                    protocol_version,
+                    [major, minor, patch],
+                    p,
+                    n,
+                    c,
+                    reset_cause,
+                    (latched_faults, last_stop, min_telemetry_interval_ms),
+                )| {
                     McuMsg::HelloReply(HelloReply {
                         protocol_version,
                         firmware_version: FirmwareVersion {
@@ -124,6 +150,9 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
                         negative_tank_min_pa: n,
                         chamber_count: c,
                         reset_cause,
+                        latched_faults,
+                        last_stop,
+                        min_telemetry_interval_ms,
                     })
                 }
             ),
