@@ -12,8 +12,8 @@ use std::process::ExitCode;
 use clap::{CommandFactory, Parser, Subcommand};
 
 use commands::{
-    analyze, bench_pipeline, cameras, completions, fit_actuator, record, replay, run, sensor, sim,
-    synth_frames, view, workspace,
+    analyze, bench_pipeline, cameras, completions, faults, fit_actuator, record, replay, run,
+    sensor, sim, synth_frames, view, workspace,
 };
 use exit::Outcome;
 
@@ -39,6 +39,10 @@ enum Command {
     Sim(sim::SimArgs),
     /// The task loop on the real gripper: serial port, rig config, frame sources.
     Run(run::RunArgs),
+    /// What the board has latched (faults, the last stop before its boot),
+    /// and a person's acknowledgement: `--clear FAULT,...` once the cause is
+    /// removed. Exit 1 while faults stay latched.
+    Faults(faults::FaultsArgs),
     /// Tactile pipeline on image files: contact centre per frame to a CSV.
     ///
     /// Writes `frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms`
@@ -87,6 +91,7 @@ impl Command {
         match self {
             Command::Sim(_) => "sim",
             Command::Run(_) => "run",
+            Command::Faults(_) => "faults",
             Command::Analyze(_) => "analyze",
             Command::BenchPipeline(_) => "bench-pipeline",
             Command::SynthFrames(_) => "synth-frames",
@@ -106,6 +111,7 @@ impl Command {
         match self {
             Command::Sim(args) => args.run(),
             Command::Run(args) => args.run(),
+            Command::Faults(args) => args.run(),
             Command::Analyze(args) => args.run(),
             Command::BenchPipeline(args) => args.run(),
             Command::SynthFrames(args) => args.run(),

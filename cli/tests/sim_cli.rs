@@ -28,7 +28,7 @@ fn malformed_scenario_file_is_a_clear_error() {
     let path = dir.path().join("bad.toml");
     std::fs::write(
         &path,
-        "name = \"x\"\nduration_s = 5\n[[poke]]\ntarget = \"elbow\"\n",
+        "[scenario]\nname = \"x\"\nduration_s = 5\n[[scenario.poke]]\ntarget = \"elbow\"\n",
     )
     .unwrap();
     let o = dexitac(&["sim", "--scenario", path.to_str().unwrap()]);
@@ -49,7 +49,7 @@ fn out_of_range_speed_is_refused() {
 #[test]
 fn run_with_a_bad_config_or_port_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
-    let config = dir.path().join("gripper.toml");
+    let config = dir.path().join("rig.toml");
     std::fs::write(&config, "grasp_chambers = [0, 99]\n").unwrap();
     let o = dexitac(&[
         "run",
@@ -120,8 +120,8 @@ fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
         }
         dirs.push(d);
     }
-    let config = dir.path().join("gripper.toml");
-    std::fs::write(&config, "tank_positive_kpa = 30.0\n").unwrap();
+    let config = dir.path().join("rig.toml");
+    std::fs::write(&config, "[tanks]\npositive_kpa = 30.0\n").unwrap();
     let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
     let port = mcu.port_path().to_str().unwrap().to_string();
     let o = dexitac(&[

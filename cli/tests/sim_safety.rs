@@ -104,6 +104,26 @@ fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
     // Safe state: every valve closed, both pumps off.
     assert_eq!(tripped.chambers, [ValveState::Hold; CHAMBER_COUNT]);
     assert!(!tripped.pumps.positive_on && !tripped.pumps.negative_on);
+
+    // The trip stays latched until a person acknowledges it by name.
+    let port = mcu.port_path().to_str().expect("pty path").to_string();
+    let faults = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_dexitac"))
+            .args(["faults", "--port", &port])
+            .args(extra)
+            .output()
+            .expect("run dexitac faults")
+    };
+    let shown = faults(&[]);
+    let text = String::from_utf8_lossy(&shown.stdout).into_owned();
+    assert_eq!(shown.status.code(), Some(1), "{text}");
+    assert!(text.contains("host-silence"), "{text}");
+    assert_eq!(mcu.snapshot().state, ArmState::Tripped);
+    let cleared = faults(&["--clear", "host-silence"]);
+    let text = String::from_utf8_lossy(&cleared.stdout).into_owned();
+    assert_eq!(cleared.status.code(), Some(0), "{text}");
+    assert!(text.contains("cleared: host-silence"), "{text}");
+    assert_eq!(mcu.snapshot().state, ArmState::Disarmed);
 }
 
 #[test]

@@ -30,7 +30,11 @@ fn pngs(dir: &Path) -> Vec<PathBuf> {
 /// A short scenario: charge, close, hold.
 fn short_scenario(dir: &Path) -> PathBuf {
     let path = dir.join("short.toml");
-    std::fs::write(&path, "name = \"view-test\"\nduration_s = 5.0\n").unwrap();
+    std::fs::write(
+        &path,
+        "[scenario]\nname = \"view-test\"\nduration_s = 5.0\n",
+    )
+    .unwrap();
     path
 }
 
@@ -309,7 +313,11 @@ fn closing_the_sim_window_stops_the_run_safely() {
     let Some(x) = start_xvfb() else { return };
     let dir = tempfile::tempdir().unwrap();
     let scenario = dir.path().join("long.toml");
-    std::fs::write(&scenario, "name = \"view-long\"\nduration_s = 120.0\n").unwrap();
+    std::fs::write(
+        &scenario,
+        "[scenario]\nname = \"view-long\"\nduration_s = 120.0\n",
+    )
+    .unwrap();
     let out = dir.path().join("out");
     // stderr to a file: the status line would fill a pipe nobody reads.
     let log = dir.path().join("stderr.txt");

@@ -2,7 +2,7 @@
 //! voxel-occupancy volume at halving voxel edges (grid from
 //! `Grid::for_gap`), the measured neighbour gap, the Richardson
 //! extrapolation `2 V(v) - V(2v)` and the time. Numbers recorded in
-//! host/KINEMATICS.md.
+//! gripper/KINEMATICS.md.
 //!
 //! `cargo run --release -p dexitac --example workspace_convergence [VOXELS_MM...]`
 

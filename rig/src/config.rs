@@ -20,9 +20,10 @@
 //!
 //! ```
 //! use dexitac_rig::config::RigConfig;
-//! let rig = RigConfig::from_toml_str("[tanks]\npositive_kpa = 35.0\n", "example").unwrap();
+//! let rig: RigConfig = RigConfig::from_toml_str("[tanks]\npositive_kpa = 35.0\n", "example").unwrap();
 //! assert_eq!(rig.control().unwrap().tank_targets_pa.0, 35_000);
-//! let err = RigConfig::from_toml_str("[tanks]\npositive = 35.0\n", "example").unwrap_err();
+//! let err = RigConfig::<dexitac_rig::config::NoScenario>::from_toml_str("[tanks]\npositive = 35.0\n", "example")
+//!     .unwrap_err();
 //! assert!(err.to_string().contains("line 2"), "{err}");
 //! ```
 
@@ -379,6 +380,22 @@ impl<S: for<'de> Deserialize<'de>> RigConfig<S> {
 }
 
 impl<S> RigConfig<S> {
+    /// The rig tables and the `[scenario]` table, apart.
+    pub fn split_scenario(self) -> (RigConfig, Option<S>) {
+        let rig = RigConfig {
+            link: self.link,
+            chambers: self.chambers,
+            tanks: self.tanks,
+            grasp: self.grasp,
+            control: self.control,
+            fingertip: self.fingertip,
+            gripper: self.gripper,
+            task: self.task,
+            scenario: None,
+        };
+        (rig, self.scenario)
+    }
+
     fn check(&self, origin: &str) -> Result<(), RigConfigError> {
         let invalid = |key: &str, reason: String| RigConfigError::Invalid {
             origin: origin.into(),
@@ -408,21 +425,30 @@ impl<S> RigConfig<S> {
                 "a chamber is listed twice".into(),
             ));
         }
+        // The firmware refuses targets closer to its hard limits than its
+        // guard band: say so here, before any port is opened.
+        let band = dexitac_firmware::control::DEFAULT_GUARD_BAND_PA;
         let limit_kpa = (
-            f64::from(NEGATIVE_TANK_MIN_PA) / 1e3,
-            f64::from(POSITIVE_TANK_MAX_PA) / 1e3,
+            f64::from(NEGATIVE_TANK_MIN_PA + band) / 1e3,
+            f64::from(POSITIVE_TANK_MAX_PA - band) / 1e3,
         );
         let t = self.tanks;
-        if !(t.positive_kpa.is_finite() && t.positive_kpa > 0.0 && t.positive_kpa < limit_kpa.1) {
+        if !(t.positive_kpa.is_finite() && t.positive_kpa > 0.0 && t.positive_kpa <= limit_kpa.1) {
             return Err(invalid(
                 "tanks.positive_kpa",
-                format!("must lie in (0, {}) kPa", limit_kpa.1),
+                format!(
+                    "must lie in (0, {}] kPa (the +50 kPa limit less the firmware's guard band)",
+                    limit_kpa.1
+                ),
             ));
         }
-        if !(t.negative_kpa.is_finite() && t.negative_kpa < 0.0 && t.negative_kpa > limit_kpa.0) {
+        if !(t.negative_kpa.is_finite() && t.negative_kpa < 0.0 && t.negative_kpa >= limit_kpa.0) {
             return Err(invalid(
                 "tanks.negative_kpa",
-                format!("must lie in ({}, 0) kPa", limit_kpa.0),
+                format!(
+                    "must lie in [{}, 0) kPa (the -57 kPa limit less the firmware's guard band)",
+                    limit_kpa.0
+                ),
             ));
         }
         self.grasp

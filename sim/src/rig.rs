@@ -37,6 +37,7 @@ use crate::render::Renderer;
 use crate::scenario::Scenario;
 use crate::task_report::{task_report, TaskReport};
 use dexitac_gripper::grasp::{Cause, CentreMm, Command};
+use dexitac_rig::config::RigConfigError;
 use dexitac_rig::event::{RuntimeEvent, StopReason};
 use dexitac_rig::link::{Link, LinkConfig, LinkError, LinkStats, Port};
 use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
@@ -120,6 +121,9 @@ pub enum SimError {
         /// Why.
         source: CalibrationError,
     },
+    /// The scenario's rig tables do not make a control config.
+    #[error("scenario: {0}")]
+    Config(#[from] RigConfigError),
 }
 
 /// How the scenario ended.
@@ -354,11 +358,14 @@ struct Live {
 /// Runs `scenario` on the simulated rig.
 pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimReport, SimError> {
     let wall_start = Instant::now();
+    // The scenario file's rig tables, as `dexitac run --config` reads them;
+    // `--no-tactile` (options.tactile_feedback = false) turns feedback off.
+    let base = scenario.rig.control()?;
     let control = ControlConfig {
-        tactile_feedback: options.tactile_feedback,
+        tactile_feedback: options.tactile_feedback && base.tactile_feedback,
         task: scenario.task.clone(),
         share_frames: options.share_frames,
-        ..ControlConfig::default()
+        ..base
     };
     let params = Params::default();
     let plant = Plant::new(

@@ -1,26 +1,36 @@
 //! Scenarios of the simulated rig: TOML files, with the paper's experiments
 //! embedded as presets ([`PRESETS`]).
 //!
+//! A scenario file is a rig config (`dexitac_rig::config`, the format of
+//! `dexitac run --config`; example `config/rig.example.toml`) with a
+//! `[scenario]` table added. The rig tables (`[grasp]`, `[tanks]`,
+//! `[chambers]`, `[control]`, `[task]`, ...) drive the simulated rig as
+//! they drive the real one.
+//!
 //! ```toml
+//! [scenario]
 //! name = "my-scenario"
 //! duration_s = 20.0
 //! frame_period_ms = 33        # camera frame period (simulated time)
 //! no_object = false           # true: nothing between the fingers
-//! [object]                    # sim::plant::ObjectParams (all optional)
+//! [scenario.object]           # sim::plant::ObjectParams (all optional)
 //! mass_kg = 0.1
-//! [plant]                     # sim::plant::PlantParams (all optional)
-//! [trajectory]                # lift and move, s and mm
+//! [scenario.plant]            # sim::plant::PlantParams (all optional)
+//! [scenario.trajectory]       # lift and move, s and mm
 //! lift_at_s = 10.0
-//! [task]                      # manipulation::TaskParams (optional)
-//! kind = "pour"               # pour | rotate | shake | twist
-//! stroke_ms = 3000
-//! [[poke]]                    # external forces
+//! [[scenario.poke]]           # external forces
 //! target = "object"           # object | actuator | fingertip_back
 //! finger = 0
 //! at_s = 12.0
 //! duration_s = 0.8
 //! peak_n = 3.5
 //! shape = "half_sine"         # half_sine | ramp_hold
+//!
+//! [task]                      # manipulation::TaskParams (optional)
+//! kind = "pour"               # pour | rotate | shake | twist
+//! stroke_ms = 3000
+//! [grasp]                     # Algorithm 1 (optional), as on the real rig
+//! stable_shift_mm = 0.5
 //! ```
 //!
 //! Unknown keys are errors (a typo must not silently fall back to a default).
@@ -31,6 +41,7 @@ use serde::Deserialize;
 
 use crate::plant::{ObjectParams, PlantParams, Poke, Trajectory, FINGER_COUNT};
 use dexitac_gripper::manipulation::TaskParams;
+use dexitac_rig::config::{RigConfig, RigConfigError};
 
 /// The embedded scenarios: (name, TOML).
 pub const PRESETS: [(&str, &str); 8] = [
@@ -66,13 +77,15 @@ pub enum ScenarioError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// The TOML does not parse or has unknown keys or wrong types.
-    #[error("scenario {origin}: {source}")]
-    Parse {
+    /// The TOML does not parse, has unknown keys or wrong types, or a rig
+    /// table is out of range (the message names the key and line).
+    #[error(transparent)]
+    Parse(#[from] RigConfigError),
+    /// The file has no `[scenario]` table.
+    #[error("scenario {origin}: no [scenario] table (a rig config alone is for `dexitac run`)")]
+    NoScenario {
         /// The preset name or file.
         origin: String,
-        /// The TOML error (with line and column).
-        source: toml::de::Error,
     },
     /// A value is out of its range.
     #[error("scenario {origin}: {field} = {value} is invalid: {reason}")]
@@ -92,7 +105,8 @@ fn default_frame_period_ms() -> u64 {
     33
 }
 
-/// A scenario of the simulated rig.
+/// A scenario of the simulated rig: the `[scenario]` table of a rig config
+/// file, with the file's `[task]` and its other rig tables.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
@@ -121,9 +135,15 @@ pub struct Scenario {
     /// External forces.
     #[serde(default, rename = "poke")]
     pub pokes: Vec<Poke>,
-    /// A manipulation task to run once the grasp is stable.
-    #[serde(default)]
+    /// A manipulation task to run once the grasp is stable: the file's
+    /// top-level `[task]` table.
+    #[serde(skip)]
     pub task: Option<TaskParams>,
+    /// The file's rig tables (`[grasp]`, `[tanks]`, `[chambers]`,
+    /// `[control]`, `[[fingertip]]`, `[gripper]`; `dexitac_rig::config`);
+    /// its task is [`Scenario::task`].
+    #[serde(skip)]
+    pub rig: RigConfig,
 }
 
 impl Scenario {
@@ -148,10 +168,13 @@ impl Scenario {
 
     /// Parses and validates a scenario; `origin` names it in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Scenario, ScenarioError> {
-        let scenario: Scenario = toml::from_str(text).map_err(|source| ScenarioError::Parse {
+        let rig = RigConfig::<Scenario>::from_toml_str(text, origin)?;
+        let (mut rig, scenario) = rig.split_scenario();
+        let mut scenario = scenario.ok_or_else(|| ScenarioError::NoScenario {
             origin: origin.to_string(),
-            source,
         })?;
+        scenario.task = rig.task.take();
+        scenario.rig = rig;
         scenario.validate(origin)?;
         Ok(scenario)
     }
@@ -247,10 +270,6 @@ impl Scenario {
                 ));
             }
         }
-        if let Some(task) = &self.task {
-            task.validate()
-                .map_err(|(field, value, reason)| bad(field, value, reason))?;
-        }
         let t = &self.trajectory;
         for (field, v) in [
             ("trajectory.lift_at_s", t.lift_at_s),
@@ -300,22 +319,25 @@ mod tests {
             Err(ScenarioError::Unknown { .. })
         ));
         assert!(matches!(
-            Scenario::from_toml_str("name = \"x\"\nduration_s = 1.0\ntypo = 3\n", "t"),
-            Err(ScenarioError::Parse { .. })
+            Scenario::from_toml_str(
+                "[scenario]\nname = \"x\"\nduration_s = 1.0\ntypo = 3\n",
+                "t"
+            ),
+            Err(ScenarioError::Parse(_))
         ));
         assert!(matches!(
-            Scenario::from_toml_str("name = \"x\"\nduration_s = -1.0\n", "t"),
+            Scenario::from_toml_str("[scenario]\nname = \"x\"\nduration_s = -1.0\n", "t"),
             Err(ScenarioError::Invalid { .. })
         ));
         assert!(matches!(
             Scenario::from_toml_str(
-                "name = \"x\"\nduration_s = 1.0\n[[poke]]\ntarget = \"object\"\nfinger = 7\nat_s = 0.0\nduration_s = 1.0\npeak_n = 1.0\n",
+                "[scenario]\nname = \"x\"\nduration_s = 1.0\n[[scenario.poke]]\ntarget = \"object\"\nfinger = 7\nat_s = 0.0\nduration_s = 1.0\npeak_n = 1.0\n",
                 "t"
             ),
             Err(ScenarioError::Invalid { .. })
         ));
         assert!(matches!(
-            Scenario::from_toml_str("name = \"x\"\nduration_s = nan\n", "t"),
+            Scenario::from_toml_str("[scenario]\nname = \"x\"\nduration_s = nan\n", "t"),
             Err(ScenarioError::Invalid { .. })
         ));
     }
@@ -326,11 +348,12 @@ mod tests {
         let path = dir.path().join("s.toml");
         std::fs::write(
             &path,
-            "name = \"file\"\nduration_s = 2.0\nno_object = true\n",
+            "[scenario]\nname = \"file\"\nduration_s = 2.0\nno_object = true\n[tanks]\npositive_kpa = 35.0\n",
         )
         .unwrap();
         let s = Scenario::load(path.to_str().unwrap()).unwrap();
         assert_eq!(s.name, "file");
         assert!(s.object().is_none());
+        assert_eq!(s.rig.tanks.positive_kpa, 35.0);
     }
 }

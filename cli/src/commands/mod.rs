@@ -5,6 +5,7 @@ pub mod analyze;
 pub mod bench_pipeline;
 pub mod cameras;
 pub mod completions;
+pub mod faults;
 pub mod fit_actuator;
 pub mod record;
 pub mod replay;

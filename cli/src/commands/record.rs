@@ -1,7 +1,7 @@
 //! `dexitac record` (sensors only: frames -> pipeline -> MCAP), `dexitac
 //! replay` (the pipeline again over a recording, compared), and the
 //! `--record` flags of `sim` and `run`. Format and topics:
-//! `host/RECORDING.md`, `dexitac_rig::recording`.
+//! `rig/RECORDING.md`, `dexitac_rig::recording`.
 
 use crate::exit::Outcome;
 use crate::shared::record::{describe, open_recorder};

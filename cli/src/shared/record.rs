@@ -12,7 +12,7 @@ use dexitac_tactile::params::Params;
 /// The recording flags of `dexitac sim` and `dexitac run`.
 #[derive(Debug, clap::Args)]
 pub struct RecordFlags {
-    /// Record the run to this MCAP file (topics: host/RECORDING.md).
+    /// Record the run to this MCAP file (topics: rig/RECORDING.md).
     #[arg(long, value_name = "FILE.mcap")]
     pub record: Option<PathBuf>,
     /// Also record the fingertip frames (PNG; `dexitac replay` needs them).

@@ -7,7 +7,7 @@
 //! schema. Every message carries a Foxglove-style `timestamp` (`{sec,
 //! nsec}`, Unix time: the recording's start plus the loop's clock) and, in
 //! the `dexitac.*` ones, the loop's clock itself as `t_ms`. The table of
-//! topics is in `host/RECORDING.md`.
+//! topics is in `rig/RECORDING.md`.
 
 use serde::{Deserialize, Serialize};
 

@@ -19,7 +19,7 @@
 //!   speed; [`replay::replay`] runs the pipeline again and compares the
 //!   contact centres with the recorded ones.
 //!
-//! Topics, schemas, fields and units: `host/RECORDING.md` and
+//! Topics, schemas, fields and units: `rig/RECORDING.md` and
 //! [`topic`]. Times: every message's MCAP `log_time` is
 //! `start_unix_ns + t_ms * 1e6`, `t_ms` being the loop's clock.
 //!
