@@ -25,6 +25,7 @@ LAYERS = {
     "dexitac-view": 4,
     "dexitac": 5,
     "dexitac-e2e": 6,
+    "dexitac-benches": 6,
 }
 PURE = ["dexitac-tactile", "dexitac-gripper"]
 PURE_MAY_USE = {"dexitac-protocol"}
