@@ -9,6 +9,8 @@ use dexitac_tactile::params::DensityMode;
 use dexitac_tactile::synth::Category;
 
 use crate::exit::Outcome;
+use crate::shared::out_dir::{self, Owned};
+use crate::shared::progress;
 
 /// Arguments of `dexitac bench-pipeline`.
 #[derive(Debug, clap::Args)]
@@ -40,6 +42,13 @@ const COLOURS: [([u8; 3], &str); 9] = [
     ([0, 0, 0], "black"),
 ];
 
+/// The files `dexitac bench-pipeline` writes into --out-dir.
+const OWNED: [Owned; 3] = [
+    Owned::File("results.md"),
+    Owned::File("pareto.png"),
+    Owned::File("pareto.svg"),
+];
+
 impl BenchArgs {
     /// Runs the command.
     pub fn run(&self) -> anyhow::Result<Outcome> {
@@ -49,11 +58,14 @@ impl BenchArgs {
 }
 
 fn run_inner(args: &BenchArgs) -> anyhow::Result<()> {
-    std::fs::create_dir_all(&args.out_dir)
-        .map_err(|e| anyhow!("cannot create {}: {e}", args.out_dir.display()))?;
+    out_dir::prepare("bench-pipeline", &args.out_dir, &OWNED)?;
+    let settings = bench::settings();
+    const SIZES: [(usize, usize); 3] = [(320, 240), (640, 480), (1280, 960)];
+    let bar = progress::bar((settings.len() + SIZES.len()) as u64, "settings and sizes");
     let mut details = String::new();
     let mut pooled: Vec<Pooled> = Vec::new();
-    for setting in bench::settings() {
+    for setting in settings {
+        bar.inc(1);
         let exact = setting.params.density.mode == DensityMode::Exact;
         let frames = if exact {
             args.exact_frames
@@ -90,7 +102,8 @@ fn run_inner(args: &BenchArgs) -> anyhow::Result<()> {
         "| size | contact: detect | kde | segment | total ms | no contact: total ms |"
     );
     let _ = writeln!(report, "|---|---|---|---|---|---|");
-    for (w, h) in [(320, 240), (640, 480), (1280, 960)] {
+    for (w, h) in SIZES {
+        bar.inc(1);
         tracing::info!("bench-pipeline: timing {w}x{h}");
         let (c, n) =
             bench::time_at_size(w, h, args.frames, args.seed).map_err(|e| anyhow!("{e}"))?;
@@ -119,6 +132,7 @@ fn run_inner(args: &BenchArgs) -> anyhow::Result<()> {
     let png = args.out_dir.join("pareto.png");
     plot.save(&png)
         .map_err(|e| anyhow!("cannot write {}: {e}", png.display()))?;
+    bar.finish_and_clear();
     std::fs::write(args.out_dir.join("results.md"), &report)
         .map_err(|e| anyhow!("cannot write results.md: {e}"))?;
     tracing::info!("bench-pipeline: wrote {} and results.md", png.display());
