@@ -249,7 +249,10 @@ impl SerialLink {
             match attempt {
                 Ok(reply) => return Ok(reply),
                 Err(e) if Instant::now() >= deadline => return Err(e),
-                Err(_) => std::thread::sleep(Duration::from_millis(50)),
+                Err(e) => {
+                    tracing::debug!("link: reconnecting to {}: {e}", path.display());
+                    std::thread::sleep(Duration::from_millis(50));
+                }
             }
         }
     }
@@ -393,6 +396,12 @@ impl<P: Port> Link<P> {
         for attempt in 0..attempts {
             if attempt > 0 {
                 self.stats.retries += 1;
+                tracing::debug!(
+                    "link: no answer to #{seq} {msg:?}, sending again (attempt {})",
+                    attempt + 1
+                );
+            } else {
+                tracing::trace!("link: #{seq} {msg:?}");
             }
             self.write_frame(seq, msg)?;
             if attempt == 0 {
@@ -401,10 +410,12 @@ impl<P: Port> Link<P> {
             let until = Instant::now() + Duration::from_millis(self.config.ack_timeout_ms);
             while Instant::now() < until {
                 if let Some(reply) = self.read_some(answers)? {
+                    tracing::trace!("link: #{seq} answered: {reply:?}");
                     return Ok((seq, reply));
                 }
             }
         }
+        tracing::warn!("link: #{seq} {msg:?} unanswered after {attempts} attempt(s)");
         Err(LinkError::Timeout { msg, seq, attempts })
     }
 

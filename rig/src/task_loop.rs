@@ -421,6 +421,12 @@ impl<P: Port> Control<'_, P> {
     }
 
     fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+        tracing::debug!(
+            "task loop: {:.3} s: Algorithm 1 decided {:?} ({:?})",
+            self.clock.now_ms() as f64 / 1e3,
+            decision.command,
+            decision.cause
+        );
         let _ = self.events.send(RuntimeEvent::Decision {
             t_ms: self.clock.now_ms(),
             decision,
