@@ -349,3 +349,52 @@ fn synth_frames_then_analyze_round_trip() {
     ]);
     assert_eq!(bad.status.code(), Some(2));
 }
+
+/// Frames of the same name from two folders get distinct labels and marker
+/// files (the second no longer overwrites the first); a marker folder that
+/// already holds marker files is refused; the run ends with a summary line.
+#[test]
+fn same_named_frames_from_two_folders_stay_apart() {
+    let fx = fixture();
+    let (name, _) = &fx.truth[0];
+    for run_dir in ["run1", "run2"] {
+        let d = fx.root.join(run_dir);
+        std::fs::create_dir_all(&d).unwrap();
+        std::fs::copy(
+            fx.root.join("frames").join(format!("{name}.png")),
+            d.join(format!("{name}.png")),
+        )
+        .unwrap();
+    }
+    let out = fx.root.join("two.csv");
+    let markers = fx.root.join("two-markers");
+    let args = |markers: &std::path::Path| {
+        run(&[
+            "analyze",
+            "--rest",
+            fx.root.join("rest.png").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--markers-out",
+            markers.to_str().unwrap(),
+            fx.root.join("run1").to_str().unwrap(),
+            fx.root.join("run2").to_str().unwrap(),
+        ])
+    };
+    let r = args(&markers);
+    let stderr = String::from_utf8_lossy(&r.stderr).into_owned();
+    assert!(r.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("2 frame(s) analysed") && stderr.contains("median"),
+        "{stderr}"
+    );
+    let (_, rows) = read_csv(&out);
+    let labels: Vec<&str> = rows.iter().map(|r| r.0.as_str()).collect();
+    assert_eq!(labels, [format!("run1/{name}"), format!("run2/{name}")]);
+    for run_dir in ["run1", "run2"] {
+        assert!(markers.join(format!("{run_dir}__{name}.csv")).is_file());
+    }
+    let again = args(&markers);
+    assert_eq!(again.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&again.stderr).contains("already holds 2 CSV file(s)"));
+}

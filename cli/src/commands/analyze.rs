@@ -100,6 +100,19 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     if let Some(dir) = &args.markers_out {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))?;
+        // Marker files of an earlier run would mix with these: refuse
+        // rather than delete CSVs that may be someone else's.
+        let old = std::fs::read_dir(dir)
+            .map_err(|e| anyhow!("cannot list {}: {e}", dir.display()))?
+            .filter_map(Result::ok)
+            .filter(|e| e.path().extension().is_some_and(|x| x == "csv"))
+            .count();
+        if old > 0 {
+            return Err(anyhow!(
+                "--markers-out {} already holds {old} CSV file(s): give an empty or new folder",
+                dir.display()
+            ));
+        }
     }
     let out = File::create(&args.out)
         .map_err(|e| anyhow!("cannot create {}: {e}", args.out.display()))?;

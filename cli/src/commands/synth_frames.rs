@@ -2,8 +2,8 @@
 //! to try `dexitac analyze` without a sensor.
 
 use crate::exit::Outcome;
+use crate::shared::out_dir::{self, Owned};
 use anyhow::anyhow;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use dexitac_tactile::frame::GreyFrame;
@@ -49,15 +49,33 @@ fn run_inner(args: &SynthArgs) -> anyhow::Result<()> {
     if !(32..=4096).contains(&args.width) || !(32..=4096).contains(&args.height) {
         return Err(anyhow!("width and height must be 32..=4096"));
     }
+    // An earlier run's frames must not mix with these (analyze reads the
+    // whole folder): the folder's PNGs are this command's.
+    out_dir::prepare(
+        "synth-frames",
+        &args.out,
+        &[Owned::File("rest.png"), Owned::File("truth.csv")],
+    )?;
     let frames_dir = args.out.join("frames");
-    std::fs::create_dir_all(&frames_dir)
-        .map_err(|e| anyhow!("cannot create {}: {e}", frames_dir.display()))?;
+    out_dir::prepare(
+        "synth-frames",
+        &frames_dir,
+        &[Owned::Pattern {
+            prefix: "",
+            suffix: ".png",
+        }],
+    )?;
     let sensor = cat.sensor(args.width, args.height, args.seed);
     save(
         &synth::rest_frame(&sensor, args.seed ^ 0xA5A5).image,
         &args.out.join("rest.png"),
     )?;
-    let mut truth = String::from("frame,cx,cy,n_contacts\n");
+    let path = args.out.join("truth.csv");
+    let csv_err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
+    let mut truth = csv::Writer::from_path(&path).map_err(csv_err)?;
+    truth
+        .write_record(["frame", "cx", "cy", "n_contacts"])
+        .map_err(csv_err)?;
     for k in 0..args.frames {
         let f =
             synth::render(&cat.scene(&sensor, args.seed.wrapping_mul(1000).wrapping_add(k as u64)));
@@ -69,10 +87,13 @@ fn run_inner(args: &SynthArgs) -> anyhow::Result<()> {
             .map_or(("NaN".into(), "NaN".into()), |c| {
                 (format!("{:.3}", c.x), format!("{:.3}", c.y))
             });
-        let _ = writeln!(truth, "{name},{cx},{cy},{}", f.contacts.len());
+        truth
+            .write_record([name, cx, cy, f.contacts.len().to_string()])
+            .map_err(csv_err)?;
     }
-    let path = args.out.join("truth.csv");
-    std::fs::write(&path, truth).map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
+    truth
+        .flush()
+        .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
     tracing::info!(
         "dexitac synth-frames: {} {} frames in {}",
         args.frames,
