@@ -2,7 +2,7 @@
 
 use anyhow::anyhow;
 use std::fs::File;
-use std::io::{BufWriter, Write};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use dexitac_tactile::calibrate;
@@ -328,15 +328,18 @@ fn frame_labels(files: &[PathBuf]) -> Vec<String> {
         .collect()
 }
 
+/// One frame's markers, input-image px (`x,y`, 3 decimals).
 fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> anyhow::Result<()> {
-    let err = |e: std::io::Error| anyhow!("cannot write {}: {e}", path.display());
-    let mut f = BufWriter::new(File::create(path).map_err(err)?);
-    writeln!(f, "x,y").map_err(err)?;
+    let err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
+    let mut f = csv::Writer::from_path(path).map_err(err)?;
+    f.write_record(["x", "y"]).map_err(err)?;
     for m in markers {
         let p = prepared.to_input(*m);
-        writeln!(f, "{:.3},{:.3}", p.x, p.y).map_err(err)?;
+        f.write_record([format!("{:.3}", p.x), format!("{:.3}", p.y)])
+            .map_err(err)?;
     }
-    f.flush().map_err(err)
+    f.flush()
+        .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
 }
 
 /// Decodes a PNG/JPEG into 8-bit grey, RGB or RGBA.

@@ -3,7 +3,6 @@
 
 use crate::exit::Outcome;
 use anyhow::anyhow;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use dexitac_rig::recording::replay::{self, Replay};
@@ -37,13 +36,8 @@ pub struct ReplayArgs {
 
 fn write_csv(path: &Path, replay: &Replay) -> anyhow::Result<()> {
     let err = |e: std::io::Error| anyhow!("{}: {e}", path.display());
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(err)?);
-    writeln!(
-        w,
-        "sensor,t_ms,recorded_x_px,recorded_y_px,replayed_x_px,replayed_y_px,diff_px,agreement"
-    )
-    .map_err(err)?;
-    let f = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+    let csv_err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
+    let mut w = csv::Writer::from_path(path).map_err(csv_err)?;
     for c in &replay.comparisons {
         let agreement = if !c.recorded_present {
             "unmatched"
@@ -52,20 +46,33 @@ fn write_csv(path: &Path, replay: &Replay) -> anyhow::Result<()> {
         } else {
             "agree"
         };
-        writeln!(
-            w,
-            "{},{},{},{},{},{},{},{agreement}",
-            c.sensor,
-            c.t_ms,
-            f(c.recorded.map(|p| p.x)),
-            f(c.recorded.map(|p| p.y)),
-            f(c.replayed.map(|p| p.x)),
-            f(c.replayed.map(|p| p.y)),
-            f(c.diff_px()),
-        )
-        .map_err(err)?;
+        w.serialize(ComparisonRow {
+            sensor: c.sensor,
+            t_ms: c.t_ms,
+            recorded_x_px: c.recorded.map(|p| p.x),
+            recorded_y_px: c.recorded.map(|p| p.y),
+            replayed_x_px: c.replayed.map(|p| p.x),
+            replayed_y_px: c.replayed.map(|p| p.y),
+            diff_px: c.diff_px(),
+            agreement,
+        })
+        .map_err(csv_err)?;
     }
     w.flush().map_err(err)
+}
+
+/// One row of `--out`: a recorded and a replayed centre of one frame
+/// (empty cells without a contact).
+#[derive(serde::Serialize)]
+struct ComparisonRow {
+    sensor: usize,
+    t_ms: u64,
+    recorded_x_px: Option<f64>,
+    recorded_y_px: Option<f64>,
+    replayed_x_px: Option<f64>,
+    replayed_y_px: Option<f64>,
+    diff_px: Option<f64>,
+    agreement: &'static str,
 }
 
 fn replay_inner(args: &ReplayArgs) -> anyhow::Result<bool> {

@@ -3,8 +3,6 @@
 //! `dexitac_gripper::{configuration, kinematics, workspace}`.
 
 use crate::exit::Outcome;
-use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -320,17 +318,30 @@ fn write_points(path: &Path, samples: &[workspace::Sample]) -> Result<(), CliErr
         path: path.to_owned(),
         source,
     };
-    let mut w = BufWriter::new(File::create(path).map_err(io)?);
-    writeln!(w, "rot_kpa,dex0_kpa,dex1_kpa,dex2_kpa,x_mm,y_mm,z_mm").map_err(io)?;
+    let csv_io = |e: csv::Error| CliError::Io {
+        path: path.to_owned(),
+        source: e.into(),
+    };
+    let mut w = csv::Writer::from_path(path).map_err(csv_io)?;
+    w.write_record([
+        "rot_kpa", "dex0_kpa", "dex1_kpa", "dex2_kpa", "x_mm", "y_mm", "z_mm",
+    ])
+    .map_err(csv_io)?;
     for s in samples {
         let [d0, d1, d2] = s.dex_kpa;
         let [x, y, z] = s.tip_mm;
-        writeln!(
-            w,
-            "{:.3},{d0:.3},{d1:.3},{d2:.3},{x:.4},{y:.4},{z:.4}",
-            s.rot_kpa
-        )
-        .map_err(io)?;
+        let kpa = |v: f64| format!("{v:.3}");
+        let mm = |v: f64| format!("{v:.4}");
+        w.write_record([
+            kpa(s.rot_kpa),
+            kpa(d0),
+            kpa(d1),
+            kpa(d2),
+            mm(x),
+            mm(y),
+            mm(z),
+        ])
+        .map_err(csv_io)?;
     }
     w.flush().map_err(io)
 }
