@@ -79,7 +79,7 @@ fn host_driving_a_board() -> (SimMcu, Child, tempfile::TempDir) {
 #[test]
 fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
     let _serial = serial();
-    let (mcu, mut child, _dir) = host_driving_a_board();
+    let (mcu, mut child, dir) = host_driving_a_board();
     let killed_at_ms = mcu.snapshot().time_ms;
     child.0.kill().expect("kill");
     let _ = child.0.wait();
@@ -118,6 +118,24 @@ fn killed_host_process_trips_the_simulated_mcu_within_its_deadline() {
     let text = String::from_utf8_lossy(&shown.stdout).into_owned();
     assert_eq!(shown.status.code(), Some(1), "{text}");
     assert!(text.contains("host-silence"), "{text}");
+    assert_eq!(mcu.snapshot().state, ArmState::Tripped);
+    // The host does not clear it on its own: a new run refuses and says how.
+    let rig = dir.path().join("empty-rig.toml");
+    std::fs::write(&rig, "").expect("rig config");
+    let refused = Command::new(env!("CARGO_BIN_EXE_dexitac"))
+        .args([
+            "run",
+            "--port",
+            &port,
+            "--config",
+            rig.to_str().unwrap(),
+            "--render",
+        ])
+        .output()
+        .expect("run dexitac run");
+    let text = String::from_utf8_lossy(&refused.stderr).into_owned();
+    assert_eq!(refused.status.code(), Some(2), "{text}");
+    assert!(text.contains("--clear host-silence"), "{text}");
     assert_eq!(mcu.snapshot().state, ArmState::Tripped);
     let cleared = faults(&["--clear", "host-silence"]);
     let text = String::from_utf8_lossy(&cleared.stdout).into_owned();

@@ -182,6 +182,19 @@ fn run_inner(args: &RunArgs, rig: &RigConfig) -> anyhow::Result<()> {
     sources::print_camera_stats("run", &cameras);
     let recorded = finish_recorder(recorder, &args.record);
     linger.wait();
+    if let Err(dexitac_rig::task_loop::RuntimeError::McuFaultsLatched { faults, .. }) = &result {
+        let names: Vec<String> = faults
+            .iter()
+            .map(crate::commands::faults::fault_name)
+            .collect();
+        return Err(anyhow!(
+            "the board has latched faults: {}. Find and remove their cause, then acknowledge \
+             them: dexitac faults --port {} --clear {}",
+            names.join(", "),
+            port.display(),
+            names.join(",")
+        ));
+    }
     result.map_err(|e| anyhow!("{e}"))?;
     recorded
 }
