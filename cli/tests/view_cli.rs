@@ -236,16 +236,29 @@ fn start_xvfb() -> Option<Xvfb> {
         skip("Xvfb is not installed (apt-get install xvfb to run this test)");
         return None;
     }
-    let n = (100..400)
+    // Every early return skips loudly (and fails under
+    // DEXITAC_REQUIRE_WINDOW_TESTS): a window test must not pass having run
+    // nothing.
+    let Some(n) = (100..400)
         .map(|k| k + std::process::id() % 300)
-        .find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())?;
+        .find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())
+    else {
+        skip("no free X display number in :100..:699");
+        return None;
+    };
     let display = format!(":{n}");
-    let child = Command::new("Xvfb")
+    let child = match Command::new("Xvfb")
         .args([&display, "-screen", "0", "1400x900x24", "-nolisten", "tcp"])
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
-        .ok()?;
+    {
+        Ok(child) => child,
+        Err(e) => {
+            skip(&format!("Xvfb did not start: {e}"));
+            return None;
+        }
+    };
     let xvfb = Xvfb { child, display };
     let socket = format!("/tmp/.X11-unix/X{n}");
     let deadline = Instant::now() + Duration::from_secs(10);
