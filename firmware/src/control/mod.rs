@@ -87,8 +87,20 @@ pub struct Config {
     /// Plausibility window: a running pump's tank must rise by
     /// [`Config::min_rise_pa`] within this time, in milliseconds.
     pub rise_window_ms: u32,
-    /// Smallest rise of the filtered reading per window while pumping, in pascal.
+    /// Smallest rise of the filtered reading per window while pumping, in
+    /// pascal; a move of the reading by this much also shows that the
+    /// sensor follows its tank (see [`pumps::PumpMonitor`]).
     pub min_rise_pa: i32,
+    /// Stall pressures of the fastest pumps allowed for, in pascal
+    /// (positive, negative): the pressure each pump drives its tank toward.
+    pub pump_stall_pa: (i32, i32),
+    /// Time constant of the fastest pump allowed for, into its tank, in
+    /// milliseconds. With the stall pressures it bounds how fast a running
+    /// pump can raise its tank while the reading has not confirmed it.
+    pub fastest_pump_tau_ms: u32,
+    /// How far a tank's true pressure may lie beyond a filtered reading that
+    /// follows the tank (toward the limit), in pascal.
+    pub reading_margin_pa: i32,
     /// Tank targets until the host sets its own.
     pub default_targets: TankTargets,
     /// Targets must stay this far inside each hard limit, in pascal.
@@ -131,6 +143,23 @@ pub const DEFAULT_RISE_WINDOW_MS: u32 = 1_000;
 /// the slowest pump the tests allow (30 % weak, a leak, at the largest
 /// target) still rises more than 4 kPa per second.
 pub const DEFAULT_MIN_RISE_PA: i32 = 1_500;
+/// Default pump stall pressures: +80 kPa and -85 kPa, those of the tank
+/// model ([`crate::tank_model::TankModelParams::default`]; checked by the
+/// test `fastest_pump_matches_the_tank_model`). A real pump's come from its
+/// data sheet (maximum pressure and vacuum).
+pub const DEFAULT_PUMP_STALL_PA: (i32, i32) = (80_000, -85_000);
+/// Default time constant of the fastest pump: 3 076 ms, the tank model's
+/// 4 000 ms for a pump 30 % stronger than nominal (4 000 / 1.3, rounded
+/// down: toward the faster pump).
+pub const DEFAULT_FASTEST_PUMP_TAU_MS: u32 = 3_076;
+/// Default reading margin: 3 kPa. It covers the filtered noise (sensor
+/// noise of ±2 % of full scale: about 0.54 kPa standard deviation, 1.6 kPa
+/// at three), the boot zero's residue and the filter's lag; or a sensor
+/// that freezes, with its pump off, up to 3 kPa below the pressure it
+/// showed (a zero error of ±3 kPa). With the 6 kPa guard band it leaves the
+/// weakest pump the tests allow (30 % weak, leak) time to confirm a top-up
+/// from target - hysteresis before the bound reaches the limit.
+pub const DEFAULT_READING_MARGIN_PA: i32 = 3_000;
 /// Default tank targets: +40 kPa and -45 kPa.
 pub const DEFAULT_TARGETS_PA: (i32, i32) = (40_000, -45_000);
 /// Default guard band: 6 kPa (targets at most +44 / -51 kPa). It covers
@@ -175,6 +204,9 @@ impl Default for Config {
             pump_max_run_ms: DEFAULT_PUMP_MAX_RUN_MS,
             rise_window_ms: DEFAULT_RISE_WINDOW_MS,
             min_rise_pa: DEFAULT_MIN_RISE_PA,
+            pump_stall_pa: DEFAULT_PUMP_STALL_PA,
+            fastest_pump_tau_ms: DEFAULT_FASTEST_PUMP_TAU_MS,
+            reading_margin_pa: DEFAULT_READING_MARGIN_PA,
             default_targets: match TankTargets::new(DEFAULT_TARGETS_PA.0, DEFAULT_TARGETS_PA.1) {
                 Ok(t) => t,
                 // Unreachable: the constants lie inside the limits (checked
@@ -197,11 +229,20 @@ const TANK_TARGETS_ZERO: TankTargets = match TankTargets::new(0, 0) {
 };
 
 impl Config {
-    fn monitor_limits(&self) -> MonitorLimits {
+    fn monitor_limits(&self, tank: Tank) -> MonitorLimits {
+        let stall_pa = match tank {
+            Tank::Positive => self.pump_stall_pa.0,
+            Tank::Negative => self.pump_stall_pa.1,
+        };
         MonitorLimits {
             max_run_ms: self.pump_max_run_ms,
             rise_window_ms: self.rise_window_ms,
             min_rise_pa: self.min_rise_pa,
+            limit_pa: tank.toward_limit_pa(tank.limit_pa()),
+            stall_pa: tank.toward_limit_pa(stall_pa),
+            fastest_tau_ms: self.fastest_pump_tau_ms,
+            reading_margin_pa: self.reading_margin_pa,
+            period_ms: self.tick_period_ms,
         }
     }
 
@@ -529,22 +570,21 @@ impl Controller {
 
     /// Every condition present now (host silence only while armed).
     fn conditions(&mut self, now_ms: u32) -> FaultFlags {
-        let limits = self.config.monitor_limits();
         let trip_after = self.config.trip_after_ticks;
-        let positive_findings = match valid_reading(self.positive.reading()) {
-            Some(pa) => {
-                self.positive_monitor
-                    .check(Tank::Positive.toward_limit_pa(pa), now_ms, &limits)
-            }
-            None => Default::default(),
-        };
-        let negative_findings = match valid_reading(self.negative.reading()) {
-            Some(pa) => {
-                self.negative_monitor
-                    .check(Tank::Negative.toward_limit_pa(pa), now_ms, &limits)
-            }
-            None => Default::default(),
-        };
+        // What the pumps would do this tick if nothing trips.
+        let wanted = self.regulate();
+        let positive_findings = self.positive_monitor.check(
+            valid_reading(self.positive.reading()).map(|pa| Tank::Positive.toward_limit_pa(pa)),
+            now_ms,
+            wanted.positive_on,
+            &self.config.monitor_limits(Tank::Positive),
+        );
+        let negative_findings = self.negative_monitor.check(
+            valid_reading(self.negative.reading()).map(|pa| Tank::Negative.toward_limit_pa(pa)),
+            now_ms,
+            wanted.negative_on,
+            &self.config.monitor_limits(Tank::Negative),
+        );
         let mut flags = self
             .positive
             .conditions(Tank::Positive, positive_findings, trip_after)

@@ -76,9 +76,14 @@ pub struct PumpFindings {
     /// reading did not move toward the limit by the minimum rise: a stuck
     /// sensor, a dead pump or a leak.
     pub no_rise: bool,
+    /// The pump is to run for the next period, but the fastest pump the
+    /// limits allow could then carry the tank past its hard limit from the
+    /// last reading that was seen to follow the tank ([`PumpMonitor`]): the
+    /// reading has not confirmed the pumping in time (a stuck sensor).
+    pub unconfirmed_past_limit: bool,
 }
 
-/// Limits of a [`PumpMonitor`].
+/// Limits of a [`PumpMonitor`] (one tank, pumping direction).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct MonitorLimits {
     /// Longest continuous run, in milliseconds.
@@ -86,16 +91,50 @@ pub struct MonitorLimits {
     /// Length of a plausibility window, in milliseconds.
     pub rise_window_ms: u32,
     /// Smallest rise (in pumping direction) of the filtered reading over a
-    /// window while the pump runs, in pascal.
+    /// window while the pump runs, in pascal. A move of the filtered reading
+    /// by this much (either way) also shows that the sensor follows the tank.
     pub min_rise_pa: i32,
+    /// The tank's hard limit in pumping direction, in pascal.
+    pub limit_pa: i32,
+    /// The fastest pump allowed for: its stall pressure in pumping
+    /// direction, in pascal ...
+    pub stall_pa: i32,
+    /// ... and its time constant into the tank, in milliseconds.
+    pub fastest_tau_ms: u32,
+    /// How far the true pressure may lie above a filtered reading that
+    /// follows the tank, in pascal.
+    pub reading_margin_pa: i32,
+    /// The control period: how long a pump runs before the next check, in
+    /// milliseconds.
+    pub period_ms: u32,
 }
 
-/// Watches one pump and its tank's filtered reading while the pump runs.
+/// Watches one pump and its tank's filtered reading.
 ///
-/// The plausibility check compares the reading at the end of each window
-/// with the reading at its start (both filtered), so noise that averages
-/// out cannot reset it, unlike a check that restarts on any small change.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// Two checks while the pump runs:
+///
+/// - The plausibility window compares the reading at the end of each
+///   window with the reading at its start (both filtered), so noise that
+///   averages out cannot reset it, unlike a check that restarts on any
+///   small change. It catches a dead pump or a leak, but with windows of
+///   1 s a stuck sensor may go unnoticed for up to two windows, long enough
+///   for a strong pump to pass the limit.
+/// - The bound: an upper bound on the tank's true pressure, kept in
+///   millipascal. While the reading is *trusted* (the pump has been off
+///   since the reading was last seen to follow the tank) it is the reading
+///   plus [`MonitorLimits::reading_margin_pa`]. While the pump runs it
+///   grows as the fastest allowed pump would drive the tank
+///   (`d/dt = (stall - bound) / tau`, explicit Euler steps, which never
+///   under-estimate), and is lowered to the reading plus the margin only
+///   when the reading *confirms*: rises by [`MonitorLimits::min_rise_pa`]
+///   from the reading of the last confirmation (a fall is no proof: a
+///   sensor may freeze low, and the pump should raise it). A stuck sensor never
+///   confirms, so the bound reaches the limit before the true pressure can,
+///   and the pump is stopped one period before. After the pump stops, the
+///   reading is trusted again only once it has moved by the minimum rise
+///   (a frozen reading never does: a pump that starts on it trips again
+///   when the bound allows no further run).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct PumpMonitor {
     /// When the pump was last switched on, if it is on.
     on_since_ms: Option<u32>,
@@ -103,50 +142,149 @@ pub struct PumpMonitor {
     /// pumping direction.
     window_start_ms: u32,
     window_start_pa: i32,
+    /// Upper bound on the true pressure in pumping direction, millipascal.
+    bound_mpa: i64,
+    /// The reading (pumping direction) at the last confirmation, pascal.
+    anchor_pa: i32,
+    /// The pump has not run since the reading was last seen to follow the
+    /// tank (true at boot: the tank is at rest).
+    trusted: bool,
+    /// Time of the last [`PumpMonitor::check`].
+    last_check_ms: Option<u32>,
 }
 
+impl Default for PumpMonitor {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+const MPA_PER_PA: i64 = 1_000;
+
 impl PumpMonitor {
+    /// A monitor of a pump that is off, on a tank at rest.
+    pub const fn new() -> Self {
+        PumpMonitor {
+            on_since_ms: None,
+            window_start_ms: 0,
+            window_start_pa: 0,
+            bound_mpa: 0,
+            anchor_pa: 0,
+            trusted: true,
+            last_check_ms: None,
+        }
+    }
+
     /// Checks the period that ends `now_ms`, during which the pump was as
     /// last reported by [`PumpMonitor::record`]. `toward_limit_pa` is the
-    /// filtered reading in pumping direction ([`Tank::toward_limit_pa`]).
+    /// filtered reading in pumping direction ([`Tank::toward_limit_pa`]),
+    /// `None` without a valid reading; `runs_next` says whether the pump is
+    /// to run in the coming period.
     pub fn check(
         &mut self,
-        toward_limit_pa: i32,
+        toward_limit_pa: Option<i32>,
         now_ms: u32,
+        runs_next: bool,
         limits: &MonitorLimits,
     ) -> PumpFindings {
-        let Some(on_since_ms) = self.on_since_ms else {
-            return PumpFindings::default();
+        let elapsed_ms = self
+            .last_check_ms
+            .map_or(0, |last| now_ms.wrapping_sub(last));
+        self.last_check_ms = Some(now_ms);
+        if self.on_since_ms.is_some() {
+            self.bound_mpa = grow_bound(self.bound_mpa, elapsed_ms, limits);
+        }
+        if let Some(pa) = toward_limit_pa {
+            self.follow_reading(pa, limits);
+        }
+        let unconfirmed_past_limit = runs_next
+            && grow_bound(self.bound_mpa, limits.period_ms, limits)
+                >= i64::from(limits.limit_pa) * MPA_PER_PA;
+        let (Some(on_since_ms), Some(pa)) = (self.on_since_ms, toward_limit_pa) else {
+            return PumpFindings {
+                unconfirmed_past_limit,
+                ..PumpFindings::default()
+            };
         };
         let mut no_rise = false;
         if now_ms.wrapping_sub(self.window_start_ms) >= limits.rise_window_ms {
-            no_rise = toward_limit_pa.saturating_sub(self.window_start_pa) < limits.min_rise_pa;
+            no_rise = pa.saturating_sub(self.window_start_pa) < limits.min_rise_pa;
             self.window_start_ms = now_ms;
-            self.window_start_pa = toward_limit_pa;
+            self.window_start_pa = pa;
         }
         PumpFindings {
             run_time_exceeded: now_ms.wrapping_sub(on_since_ms) > limits.max_run_ms,
             no_rise,
+            unconfirmed_past_limit,
         }
     }
 
-    /// Records the pump's state from `now_ms` on.
+    /// Updates the bound from a valid reading: the reading plus the margin
+    /// while trusted, or when it confirms. With the pump running only a
+    /// rise of the minimum rise confirms; a fall by as much (chambers
+    /// drawing air, or a sensor freezing low) only moves the reference of
+    /// the next rise down. With the pump off, a move either way trusts the
+    /// reading again.
+    fn follow_reading(&mut self, pa: i32, limits: &MonitorLimits) {
+        let reading_bound_mpa = (i64::from(pa) + i64::from(limits.reading_margin_pa)) * MPA_PER_PA;
+        let rise_pa = pa.saturating_sub(self.anchor_pa);
+        let pumping = self.on_since_ms.is_some();
+        if self.trusted || (!pumping && rise_pa.saturating_abs() >= limits.min_rise_pa) {
+            self.trusted = !pumping;
+            self.bound_mpa = reading_bound_mpa;
+            self.anchor_pa = pa;
+        } else if pumping && rise_pa >= limits.min_rise_pa {
+            self.bound_mpa = self.bound_mpa.min(reading_bound_mpa);
+            self.anchor_pa = pa;
+        } else if pumping && rise_pa <= -limits.min_rise_pa {
+            self.anchor_pa = pa;
+        }
+    }
+
+    /// Records the pump's state from `now_ms` on; `toward_limit_pa` is the
+    /// filtered reading in pumping direction.
     pub fn record(&mut self, on: bool, toward_limit_pa: i32, now_ms: u32) {
         match (on, self.on_since_ms) {
             (true, None) => {
                 self.on_since_ms = Some(now_ms);
                 self.window_start_pa = toward_limit_pa;
                 self.window_start_ms = now_ms;
+                self.trusted = false;
             }
             (false, Some(_)) => self.on_since_ms = None,
             _ => {}
         }
     }
 
-    /// Forgets the pump's history (pump off).
+    /// Forgets the pump's run (pump off). The bound and whether the reading
+    /// is trusted stay: a trip does not make a stuck sensor trustworthy.
     pub fn reset(&mut self) {
         self.on_since_ms = None;
     }
+
+    /// The upper bound on the true pressure in pumping direction, pascal
+    /// (rounded up).
+    pub fn bound_pa(&self) -> i32 {
+        let pa = (self.bound_mpa + MPA_PER_PA - 1).div_euclid(MPA_PER_PA);
+        i32::try_from(pa).unwrap_or(i32::MAX)
+    }
+}
+
+/// `bound_mpa` after `dt_ms` of the fastest allowed pump: explicit Euler
+/// steps of at most the time constant, each at least 1 mPa (never less than
+/// the exact growth).
+fn grow_bound(bound_mpa: i64, dt_ms: u32, limits: &MonitorLimits) -> i64 {
+    let tau = i64::from(limits.fastest_tau_ms.max(1));
+    let stall_mpa = i64::from(limits.stall_pa) * MPA_PER_PA;
+    let mut bound = bound_mpa;
+    let mut left = i64::from(dt_ms);
+    while left > 0 && bound < stall_mpa {
+        let step = left.min(tau);
+        // stall > bound here, so the rounded-up quotient is positive.
+        bound += (((stall_mpa - bound) * step + tau - 1) / tau).max(1);
+        left -= step;
+    }
+    bound
 }
 
 #[cfg(test)]
@@ -157,6 +295,17 @@ mod tests {
         max_run_ms: 1000,
         rise_window_ms: 200,
         min_rise_pa: 100,
+        limit_pa: 50_000,
+        stall_pa: 80_000,
+        fastest_tau_ms: 3_076,
+        reading_margin_pa: 3_000,
+        period_ms: 1,
+    };
+
+    /// Limits with a bound that never reaches the limit (window tests).
+    const FAR_LIMIT: MonitorLimits = MonitorLimits {
+        limit_pa: i32::MAX,
+        ..LIMITS
     };
 
     #[test]
@@ -247,8 +396,8 @@ mod tests {
     fn monitor_flags_a_reading_that_does_not_rise() {
         let mut m = PumpMonitor::default();
         m.record(true, 1_000, 0);
-        assert!(!m.check(1_050, 199, &LIMITS).no_rise);
-        assert!(m.check(1_050, 200, &LIMITS).no_rise);
+        assert!(!m.check(Some(1_050), 199, true, &FAR_LIMIT).no_rise);
+        assert!(m.check(Some(1_050), 200, true, &FAR_LIMIT).no_rise);
     }
 
     #[test]
@@ -259,7 +408,7 @@ mod tests {
         m.record(true, 1_000, 0);
         let flagged = (1..=200u32).any(|t| {
             let noise = if t % 2 == 0 { 80 } else { -80 };
-            m.check(1_000 + noise, t, &LIMITS).no_rise
+            m.check(Some(1_000 + noise), t, true, &FAR_LIMIT).no_rise
         });
         assert!(flagged);
     }
@@ -270,7 +419,7 @@ mod tests {
         m.record(true, 1_000, 0);
         for t in 1..=900u32 {
             let p = 1_000 + (t as i32) * 2;
-            assert!(!m.check(p, t, &LIMITS).no_rise);
+            assert!(!m.check(Some(p), t, true, &FAR_LIMIT).no_rise);
         }
     }
 
@@ -278,9 +427,81 @@ mod tests {
     fn monitor_flags_run_time_over_limit() {
         let mut m = PumpMonitor::default();
         m.record(true, 0, 0);
-        assert!(!m.check(0, 1000, &LIMITS).run_time_exceeded);
-        assert!(m.check(0, 1001, &LIMITS).run_time_exceeded);
+        assert!(!m.check(Some(0), 1000, true, &FAR_LIMIT).run_time_exceeded);
+        assert!(m.check(Some(0), 1001, true, &FAR_LIMIT).run_time_exceeded);
         m.record(false, 0, 1001);
-        assert_eq!(m.check(0, 5000, &LIMITS), PumpFindings::default());
+        assert_eq!(
+            m.check(Some(0), 5000, false, &FAR_LIMIT),
+            PumpFindings::default()
+        );
+    }
+
+    /// Runs the monitor on `reading(t)` for t = 1..=ms with the pump on
+    /// from t = 1; returns the first tick at which the bound stops it.
+    fn first_unconfirmed(
+        m: &mut PumpMonitor,
+        ms: u32,
+        reading: impl Fn(u32) -> i32,
+    ) -> Option<u32> {
+        for t in 1..=ms {
+            if m.check(Some(reading(t)), t, true, &LIMITS)
+                .unconfirmed_past_limit
+            {
+                return Some(t);
+            }
+            m.record(true, reading(t), t);
+        }
+        None
+    }
+
+    #[test]
+    fn bound_stops_a_pump_on_a_frozen_reading_before_the_fastest_pump_reaches_the_limit() {
+        let mut m = PumpMonitor::new();
+        // Trusted at 42 kPa: bound 45 kPa. The fastest pump (stall 80 kPa,
+        // tau 3 076 ms) takes 3076 * ln(35 / 30) = 474 ms from 45 to 50 kPa.
+        // The pump starts at t = 1: it has run t - 1 ms when stopped.
+        let ran_ms = first_unconfirmed(&mut m, 2_000, |_| 42_000).unwrap() - 1;
+        assert!((440..=474).contains(&ran_ms), "{ran_ms}");
+    }
+
+    #[test]
+    fn bound_lets_a_slow_pump_whose_reading_rises_top_up() {
+        // 30 % weak pump near the target: 5 kPa/s, from 42 to 44 kPa.
+        let mut m = PumpMonitor::new();
+        let rising = |t: u32| 42_000 + (5 * t as i32).min(2_000);
+        assert_eq!(first_unconfirmed(&mut m, 400, rising), None);
+    }
+
+    #[test]
+    fn a_frozen_reading_is_not_trusted_again_after_the_trip() {
+        let mut m = PumpMonitor::new();
+        assert!(first_unconfirmed(&mut m, 2_000, |_| 42_000).is_some());
+        m.reset();
+        for t in 2_000..12_000 {
+            assert!(
+                !m.check(Some(42_000), t, false, &LIMITS)
+                    .unconfirmed_past_limit
+            );
+            m.record(false, 42_000, t);
+        }
+        // The pump would start again: stopped at once.
+        assert!(
+            m.check(Some(42_000), 12_000, true, &LIMITS)
+                .unconfirmed_past_limit
+        );
+    }
+
+    #[test]
+    fn a_reading_that_moves_with_the_pump_off_is_trusted_again() {
+        let mut m = PumpMonitor::new();
+        assert!(first_unconfirmed(&mut m, 2_000, |_| 42_000).is_some());
+        m.reset();
+        // The tank leaks: the reading falls by the minimum rise.
+        m.check(Some(42_000 - LIMITS.min_rise_pa), 2_100, false, &LIMITS);
+        assert_eq!(m.bound_pa(), 42_000 - LIMITS.min_rise_pa + 3_000);
+        assert!(
+            !m.check(Some(41_000), 2_101, true, &LIMITS)
+                .unconfirmed_past_limit
+        );
     }
 }
