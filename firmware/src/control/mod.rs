@@ -101,6 +101,10 @@ pub struct Config {
     /// How far a tank's true pressure may lie beyond a filtered reading that
     /// follows the tank (toward the limit), in pascal.
     pub reading_margin_pa: i32,
+    /// Longest time a pump that is to run may be held off by the pressure
+    /// bound without its reading moving, in milliseconds; then
+    /// `*PumpNoRise` trips (a stuck sensor; see [`pumps::PumpMonitor`]).
+    pub pump_max_hold_ms: u32,
     /// Tank targets until the host sets its own.
     pub default_targets: TankTargets,
     /// Targets must stay this far inside each hard limit, in pascal.
@@ -160,6 +164,14 @@ pub const DEFAULT_FASTEST_PUMP_TAU_MS: u32 = 3_076;
 /// weakest pump the tests allow (30 % weak, leak) time to confirm a top-up
 /// from target - hysteresis before the bound reaches the limit.
 pub const DEFAULT_READING_MARGIN_PA: i32 = 3_000;
+/// Default longest hold of a pump by the pressure bound without its reading
+/// moving 1.5 kPa: 10 s. While held the pump is off, so the true pressure
+/// stays below the bound (< the limit); the hold ends as soon as the
+/// reading moves ([`DEFAULT_MIN_RISE_PA`]), which a healthy tank's does
+/// within 10 s through chamber traffic or its leak (the tank model's leak,
+/// 120 s time constant, lowers 38 kPa by 1.5 kPa in about 5 s) or noise.
+/// A frozen reading never moves: `*PumpNoRise` after 10 s.
+pub const DEFAULT_PUMP_MAX_HOLD_MS: u32 = 10_000;
 /// Default tank targets: +40 kPa and -45 kPa.
 pub const DEFAULT_TARGETS_PA: (i32, i32) = (40_000, -45_000);
 /// Default guard band: 6 kPa (targets at most +44 / -51 kPa). It covers
@@ -207,6 +219,7 @@ impl Default for Config {
             pump_stall_pa: DEFAULT_PUMP_STALL_PA,
             fastest_pump_tau_ms: DEFAULT_FASTEST_PUMP_TAU_MS,
             reading_margin_pa: DEFAULT_READING_MARGIN_PA,
+            pump_max_hold_ms: DEFAULT_PUMP_MAX_HOLD_MS,
             default_targets: match TankTargets::new(DEFAULT_TARGETS_PA.0, DEFAULT_TARGETS_PA.1) {
                 Ok(t) => t,
                 // Unreachable: the constants lie inside the limits (checked
@@ -243,6 +256,7 @@ impl Config {
             fastest_tau_ms: self.fastest_pump_tau_ms,
             reading_margin_pa: self.reading_margin_pa,
             period_ms: self.tick_period_ms,
+            max_hold_ms: self.pump_max_hold_ms,
         }
     }
 
@@ -343,6 +357,11 @@ pub struct Controller {
     zero: Zero,
     positive_monitor: PumpMonitor,
     negative_monitor: PumpMonitor,
+    /// The pumps the regulator wants (its hysteresis state); a pump held
+    /// off by its monitor is wanted but not driven ([`Controller::pumps`]).
+    demand: PumpOutputs,
+    /// The pumps the monitors hold off this tick (the pressure bound).
+    held: PumpOutputs,
     last_frame_ms: u32,
     last_tick_ms: Option<u32>,
     telemetry_interval_ms: u16,
@@ -378,6 +397,8 @@ impl Controller {
             zero: Zero::Pending { ticks: 0 },
             positive_monitor: PumpMonitor::default(),
             negative_monitor: PumpMonitor::default(),
+            demand: PumpOutputs::OFF,
+            held: PumpOutputs::OFF,
             last_frame_ms: 0,
             last_tick_ms: None,
             telemetry_interval_ms: 0,
@@ -517,7 +538,11 @@ impl Controller {
             }
         }
 
-        self.pumps = self.regulate();
+        self.demand = self.regulate();
+        self.pumps = PumpOutputs {
+            positive_on: self.demand.positive_on && !self.held.positive_on,
+            negative_on: self.demand.negative_on && !self.held.negative_on,
+        };
         self.record_pumps(now_ms);
         let desired = close_toward_bad_tanks(self.chambers, present);
         let driven = self
@@ -585,6 +610,10 @@ impl Controller {
             wanted.negative_on,
             &self.config.monitor_limits(Tank::Negative),
         );
+        self.held = PumpOutputs {
+            positive_on: positive_findings.hold_off,
+            negative_on: negative_findings.hold_off,
+        };
         let mut flags = self
             .positive
             .conditions(Tank::Positive, positive_findings, trip_after)
@@ -606,6 +635,7 @@ impl Controller {
         self.positive_mode = PumpMode::Off;
         self.negative_mode = PumpMode::Off;
         self.pumps = PumpOutputs::OFF;
+        self.demand = PumpOutputs::OFF;
         self.positive_monitor.reset();
         self.negative_monitor.reset();
     }
@@ -620,7 +650,7 @@ impl Controller {
             pumps::regulate(
                 Tank::Positive,
                 self.positive_mode,
-                self.pumps.positive_on,
+                self.demand.positive_on,
                 pa,
                 self.targets.positive_pa(),
                 hysteresis_pa,
@@ -630,7 +660,7 @@ impl Controller {
             pumps::regulate(
                 Tank::Negative,
                 self.negative_mode,
-                self.pumps.negative_on,
+                self.demand.negative_on,
                 pa,
                 self.targets.negative_pa(),
                 hysteresis_pa,

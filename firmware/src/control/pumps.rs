@@ -76,11 +76,15 @@ pub struct PumpFindings {
     /// reading did not move toward the limit by the minimum rise: a stuck
     /// sensor, a dead pump or a leak.
     pub no_rise: bool,
-    /// The pump is to run for the next period, but the fastest pump the
-    /// limits allow could then carry the tank past its hard limit from the
-    /// last reading that was seen to follow the tank ([`PumpMonitor`]): the
-    /// reading has not confirmed the pumping in time (a stuck sensor).
-    pub unconfirmed_past_limit: bool,
+    /// Hold the pump off for the next period (not a fault): it is to run,
+    /// but the fastest pump the limits allow could then carry the tank past
+    /// its hard limit from the last reading that was seen to follow the
+    /// tank ([`PumpMonitor`]). It may run again once the reading moves.
+    pub hold_off: bool,
+    /// The pump has been held off ([`PumpFindings::hold_off`]) and is still
+    /// to run, and the reading has not moved since the hold began for the
+    /// hold limit ([`MonitorLimits::max_hold_ms`]): a stuck sensor.
+    pub unconfirmed_hold: bool,
 }
 
 /// Limits of a [`PumpMonitor`] (one tank, pumping direction).
@@ -107,6 +111,9 @@ pub struct MonitorLimits {
     /// The control period: how long a pump runs before the next check, in
     /// milliseconds.
     pub period_ms: u32,
+    /// Longest hold of a pump that is to run without its reading moving,
+    /// in milliseconds ([`PumpFindings::unconfirmed_hold`]).
+    pub max_hold_ms: u32,
 }
 
 /// Watches one pump and its tank's filtered reading.
@@ -151,6 +158,9 @@ pub struct PumpMonitor {
     trusted: bool,
     /// Time of the last [`PumpMonitor::check`].
     last_check_ms: Option<u32>,
+    /// Since when the pump has been held off by the bound without the
+    /// reading moving (cleared when the reading is trusted again).
+    held_since_ms: Option<u32>,
 }
 
 impl Default for PumpMonitor {
@@ -172,6 +182,7 @@ impl PumpMonitor {
             anchor_pa: 0,
             trusted: true,
             last_check_ms: None,
+            held_since_ms: None,
         }
     }
 
@@ -197,12 +208,20 @@ impl PumpMonitor {
         if let Some(pa) = toward_limit_pa {
             self.follow_reading(pa, limits);
         }
-        let unconfirmed_past_limit = runs_next
+        let hold_off = runs_next
             && grow_bound(self.bound_mpa, limits.period_ms, limits)
                 >= i64::from(limits.limit_pa) * MPA_PER_PA;
+        if hold_off && self.held_since_ms.is_none() {
+            self.held_since_ms = Some(now_ms);
+        }
+        let unconfirmed_hold = hold_off
+            && self
+                .held_since_ms
+                .is_some_and(|since| now_ms.wrapping_sub(since) >= limits.max_hold_ms);
         let (Some(on_since_ms), Some(pa)) = (self.on_since_ms, toward_limit_pa) else {
             return PumpFindings {
-                unconfirmed_past_limit,
+                hold_off,
+                unconfirmed_hold,
                 ..PumpFindings::default()
             };
         };
@@ -215,7 +234,8 @@ impl PumpMonitor {
         PumpFindings {
             run_time_exceeded: now_ms.wrapping_sub(on_since_ms) > limits.max_run_ms,
             no_rise,
-            unconfirmed_past_limit,
+            hold_off,
+            unconfirmed_hold,
         }
     }
 
@@ -231,6 +251,9 @@ impl PumpMonitor {
         let pumping = self.on_since_ms.is_some();
         if self.trusted || (!pumping && rise_pa.saturating_abs() >= limits.min_rise_pa) {
             self.trusted = !pumping;
+            if !pumping {
+                self.held_since_ms = None;
+            }
             self.bound_mpa = reading_bound_mpa;
             self.anchor_pa = pa;
         } else if pumping && rise_pa >= limits.min_rise_pa {
@@ -256,10 +279,17 @@ impl PumpMonitor {
         }
     }
 
-    /// Forgets the pump's run (pump off). The bound and whether the reading
-    /// is trusted stay: a trip does not make a stuck sensor trustworthy.
+    /// Forgets the pump's run (pump off). The bound, whether the reading is
+    /// trusted and since when the pump has been held off stay: a trip does
+    /// not make a stuck sensor trustworthy.
     pub fn reset(&mut self) {
         self.on_since_ms = None;
+    }
+
+    /// Since when the pump has been held off by the bound without its
+    /// reading moving, if it has.
+    pub fn held_since_ms(&self) -> Option<u32> {
+        self.held_since_ms
     }
 
     /// The upper bound on the true pressure in pumping direction, pascal
@@ -300,6 +330,7 @@ mod tests {
         fastest_tau_ms: 3_076,
         reading_margin_pa: 3_000,
         period_ms: 1,
+        max_hold_ms: 5_000,
     };
 
     /// Limits with a bound that never reaches the limit (window tests).
@@ -444,9 +475,7 @@ mod tests {
         reading: impl Fn(u32) -> i32,
     ) -> Option<u32> {
         for t in 1..=ms {
-            if m.check(Some(reading(t)), t, true, &LIMITS)
-                .unconfirmed_past_limit
-            {
+            if m.check(Some(reading(t)), t, true, &LIMITS).hold_off {
                 return Some(t);
             }
             m.record(true, reading(t), t);
@@ -473,22 +502,44 @@ mod tests {
     }
 
     #[test]
-    fn a_frozen_reading_is_not_trusted_again_after_the_trip() {
+    fn a_frozen_reading_holds_the_pump_off_and_is_reported_after_the_hold_limit() {
         let mut m = PumpMonitor::new();
-        assert!(first_unconfirmed(&mut m, 2_000, |_| 42_000).is_some());
-        m.reset();
-        for t in 2_000..12_000 {
-            assert!(
-                !m.check(Some(42_000), t, false, &LIMITS)
-                    .unconfirmed_past_limit
-            );
+        let held_at = first_unconfirmed(&mut m, 2_000, |_| 42_000).unwrap();
+        assert_eq!(m.held_since_ms(), Some(held_at));
+        // The pump stays off; the reading stays frozen: held, no fault ...
+        m.record(false, 42_000, held_at);
+        let fault_at = held_at + LIMITS.max_hold_ms;
+        for t in held_at + 1..fault_at {
+            let f = m.check(Some(42_000), t, true, &LIMITS);
+            assert!(f.hold_off && !f.unconfirmed_hold, "{t}");
             m.record(false, 42_000, t);
         }
-        // The pump would start again: stopped at once.
-        assert!(
-            m.check(Some(42_000), 12_000, true, &LIMITS)
-                .unconfirmed_past_limit
-        );
+        // ... until the hold limit.
+        let f = m.check(Some(42_000), fault_at, true, &LIMITS);
+        assert!(f.hold_off && f.unconfirmed_hold);
+        // A trip (reset) does not trust the reading: the pump is held again
+        // at its next start, and reported at once.
+        m.reset();
+        for t in fault_at + 1..fault_at + 10_000 {
+            m.check(Some(42_000), t, false, &LIMITS);
+            m.record(false, 42_000, t);
+        }
+        let f = m.check(Some(42_000), fault_at + 10_000, true, &LIMITS);
+        assert!(f.hold_off && f.unconfirmed_hold);
+    }
+
+    #[test]
+    fn a_held_pump_is_released_when_its_reading_moves() {
+        let mut m = PumpMonitor::new();
+        let held_at = first_unconfirmed(&mut m, 2_000, |_| 42_000).unwrap();
+        m.record(false, 42_000, held_at);
+        // A chamber draws air from the tank: the reading falls by the
+        // minimum rise with the pump off.
+        let fallen = 42_000 - LIMITS.min_rise_pa;
+        let f = m.check(Some(fallen), held_at + 300, true, &LIMITS);
+        assert!(!f.hold_off && !f.unconfirmed_hold);
+        assert_eq!(m.bound_pa(), fallen + 3_000);
+        assert_eq!(m.held_since_ms(), None);
     }
 
     #[test]
@@ -499,9 +550,6 @@ mod tests {
         // The tank leaks: the reading falls by the minimum rise.
         m.check(Some(42_000 - LIMITS.min_rise_pa), 2_100, false, &LIMITS);
         assert_eq!(m.bound_pa(), 42_000 - LIMITS.min_rise_pa + 3_000);
-        assert!(
-            !m.check(Some(41_000), 2_101, true, &LIMITS)
-                .unconfirmed_past_limit
-        );
+        assert!(!m.check(Some(41_000), 2_101, true, &LIMITS).hold_off);
     }
 }

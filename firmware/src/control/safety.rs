@@ -122,7 +122,7 @@ impl TankChannel {
         if findings.run_time_exceeded {
             flags = flags.with(run_time);
         }
-        if findings.no_rise || findings.unconfirmed_past_limit {
+        if findings.no_rise || findings.unconfirmed_hold {
             flags = flags.with(no_rise);
         }
         flags
