@@ -36,7 +36,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::actuator::{DexActuator, PressureRange, RotActuator};
-use crate::kinematics::Transform;
+use crate::kinematics::{self, Transform};
 use dexitac_protocol::limits::{NEGATIVE_TANK_MIN_KPA, POSITIVE_TANK_MAX_KPA};
 use dexitac_protocol::CHAMBER_COUNT;
 
@@ -159,7 +159,7 @@ impl FingerMount {
     pub fn transform(&self) -> Transform {
         let [x, y, z] = self.position_mm;
         let [r, p, w] = self.rpy_deg.map(f64::to_radians);
-        Transform::translation(x, y, z).then(&Transform::from_rpy(r, p, w))
+        kinematics::translation(x, y, z) * kinematics::from_rpy(r, p, w)
     }
 }
 
@@ -562,7 +562,7 @@ mod tests {
             }
             let bent = gripper_forward(&c, &p).unwrap();
             for (a, b) in rest.iter().zip(&bent) {
-                let (ra, rb) = (a.translation_mm, b.translation_mm);
+                let (ra, rb) = (a.translation.vector, b.translation.vector);
                 match c.assembly {
                     Assembly::Vertical => {
                         assert!((rb[0] - ra[0]) * ra[0].signum() < -1.0, "{preset:?}")

@@ -29,6 +29,8 @@
 
 use crate::actuator::{dex_state, rot_angle_rad, PressureError};
 use crate::configuration::{FingerType, GripperConfig};
+use nalgebra::Point3;
+
 use crate::kinematics::{
     base_part, dex_transform, finger_forward, rot_transform, tip_part, Transform,
 };
@@ -220,7 +222,7 @@ pub fn sample(
                     out.push(Sample {
                         rot_kpa,
                         dex_kpa,
-                        tip_mm: tip.translation_mm,
+                        tip_mm: tip.translation.vector.into(),
                     });
                 }
             }
@@ -311,11 +313,11 @@ enum Halves {
     /// Rot-Dex: Rot half at the palm.
     RotFirst {
         rot: Vec<Transform>,
-        dex: Vec<[f64; 3]>,
+        dex: Vec<Point3<f64>>,
     },
     /// Dex-Rot: Dex half at the palm.
     DexFirst {
-        rot: Vec<[f64; 3]>,
+        rot: Vec<Point3<f64>>,
         dex: Vec<Transform>,
     },
 }
@@ -346,7 +348,7 @@ impl Halves {
         let tip = |joints: Vec<Transform>| {
             joints
                 .iter()
-                .map(|t| tip_part(g, t).translation_mm)
+                .map(|t| Point3::from(tip_part(g, t).translation.vector))
                 .collect()
         };
         Ok(match finger {
@@ -363,10 +365,11 @@ impl Halves {
 
     /// Fingertip position for Rot level `i` and Dex grid point `j`.
     fn tip(&self, i: usize, j: usize) -> [f64; 3] {
-        match self {
-            Halves::RotFirst { rot, dex } => rot[i].apply(dex[j]),
-            Halves::DexFirst { rot, dex } => dex[j].apply(rot[i]),
-        }
+        let tip = match self {
+            Halves::RotFirst { rot, dex } => rot[i] * dex[j],
+            Halves::DexFirst { rot, dex } => dex[j] * rot[i],
+        };
+        tip.coords.into()
     }
 }
 
