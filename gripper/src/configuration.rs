@@ -234,6 +234,15 @@ impl Preset {
         }
     }
 
+    /// The first preset (in [`Preset::ALL`] order) whose fingers are of
+    /// type `finger`: HookGrip for Dex-Rot, SupportGrip for Rot-Dex.
+    pub fn for_finger(finger: FingerType) -> Preset {
+        match finger {
+            FingerType::DexRot => Preset::HookGrip,
+            FingerType::RotDex => Preset::SupportGrip,
+        }
+    }
+
     /// The preset by name (case-insensitive), if any.
     pub fn from_name(name: &str) -> Option<Preset> {
         Self::ALL
@@ -418,6 +427,14 @@ mod tests {
                 .unwrap_or_else(|e| panic!("{}: {e}", preset.name()));
             assert_eq!(c.name.to_ascii_lowercase(), preset.name());
             assert_eq!(Preset::from_name(&c.name), Some(preset));
+        }
+    }
+
+    #[test]
+    fn for_finger_is_the_first_preset_with_that_finger() {
+        for finger in [FingerType::DexRot, FingerType::RotDex] {
+            let first = Preset::ALL.into_iter().find(|p| p.config().finger == finger);
+            assert_eq!(Some(Preset::for_finger(finger)), first);
         }
     }
 

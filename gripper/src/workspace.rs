@@ -85,6 +85,68 @@ impl TipPoint {
     }
 }
 
+/// What a workspace is computed for: a finger type with the joints of a
+/// configuration. Only the configuration's joint geometry, actuator models
+/// and pressure range are used, in the assembly order of `finger`; its own
+/// finger type, assembly and palm mounts play no part (the workspace is in
+/// the finger's base frame). So a Dex-Rot workspace computed with the
+/// joints of a Rot-Dex preset is a Dex-Rot workspace, and is reported as
+/// one ([`Subject::label`]).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Subject {
+    /// The finger type computed (assembly order, palm to tip).
+    pub finger: FingerType,
+    /// Where the joints came from, e.g. `preset hookgrip` or a file path.
+    pub joints_from: String,
+    /// The name of the configuration the joints came from.
+    pub joints_config: String,
+    /// That configuration's own finger type, not used by the workspace.
+    pub joints_config_finger: FingerType,
+}
+
+impl Subject {
+    /// `finger` with the joints of `joints`, read from `joints_from`.
+    pub fn new(finger: FingerType, joints: &GripperConfig, joints_from: impl Into<String>) -> Self {
+        Subject {
+            finger,
+            joints_from: joints_from.into(),
+            joints_config: joints.name.clone(),
+            joints_config_finger: joints.finger,
+        }
+    }
+
+    /// One line for people, e.g. `dex-rot finger, joints of HookGrip
+    /// (preset hookgrip)`; names the configuration's own finger type when
+    /// it differs from the one computed.
+    ///
+    /// ```
+    /// use dexitac_gripper::configuration::{FingerType, Preset};
+    /// use dexitac_gripper::workspace::Subject;
+    /// let pinch = Preset::PinchGrip.config();
+    /// let s = Subject::new(FingerType::DexRot, &pinch, "preset pinchgrip");
+    /// assert_eq!(
+    ///     s.label(),
+    ///     "dex-rot finger, joints of PinchGrip (preset pinchgrip, a rot-dex configuration; its finger order is not used)"
+    /// );
+    /// ```
+    pub fn label(&self) -> String {
+        let other = if self.joints_config_finger == self.finger {
+            String::new()
+        } else {
+            format!(
+                ", a {} configuration; its finger order is not used",
+                self.joints_config_finger.name()
+            )
+        };
+        format!(
+            "{} finger, joints of {} ({}{other})",
+            self.finger.name(),
+            self.joints_config,
+            self.joints_from
+        )
+    }
+}
+
 /// One sample: the four chamber pressures and the fingertip position.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
@@ -523,6 +585,16 @@ mod tests {
                 assert_eq!(halves.tip(k / 27, k % 27), s.tip_mm, "{finger:?} {k}");
             }
         }
+    }
+
+    #[test]
+    fn the_subject_names_the_finger_computed_not_the_configs() {
+        let hook = Preset::HookGrip.config();
+        let s = Subject::new(FingerType::DexRot, &hook, "preset hookgrip");
+        assert_eq!(s.label(), "dex-rot finger, joints of HookGrip (preset hookgrip)");
+        let s = Subject::new(FingerType::RotDex, &hook, "preset hookgrip");
+        assert!(s.label().starts_with("rot-dex finger, joints of HookGrip"));
+        assert!(s.label().contains("a dex-rot configuration"));
     }
 
     #[test]
