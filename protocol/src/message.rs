@@ -310,6 +310,21 @@ pub enum Fault {
     HostSilence,
 }
 
+/// The fault in words, for people (logs, error messages).
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Fault::PositiveOverLimit => "positive tank over its pressure limit",
+            Fault::NegativeOverLimit => "negative tank over its vacuum limit",
+            Fault::PositiveSensor => "positive tank sensor out of range or stuck",
+            Fault::NegativeSensor => "negative tank sensor out of range or stuck",
+            Fault::PositivePumpRunTime => "positive pump over its run-time limit",
+            Fault::NegativePumpRunTime => "negative pump over its run-time limit",
+            Fault::HostSilence => "host silent past the deadline",
+        })
+    }
+}
+
 impl Fault {
     /// Every fault, in wire order.
     pub const ALL: [Fault; 7] = [

@@ -54,7 +54,7 @@ use serde::Serialize;
 use crate::plant::{ObjectState, PokeTarget, WorldState, FINGER_COUNT};
 use crate::rig::SimReport;
 use dexitac_gripper::grasp::{shifts_mm, Cause, CentreMm, Command};
-use dexitac_protocol::{ArmState, Chambers, Fault, HostMsg, PumpMode, CHAMBER_COUNT};
+use dexitac_protocol::{ArmState, Chambers, HostMsg, PumpMode, CHAMBER_COUNT};
 use dexitac_rig::event::StopReason;
 
 /// Writes the text files (`events.log`, `timeseries.csv`, `summary.json`)
@@ -170,18 +170,6 @@ fn host_msg_words(msg: &HostMsg) -> String {
     }
 }
 
-fn fault_words(f: Fault) -> &'static str {
-    match f {
-        Fault::PositiveOverLimit => "positive tank over its limit",
-        Fault::NegativeOverLimit => "negative tank over its limit",
-        Fault::PositiveSensor => "positive tank sensor",
-        Fault::NegativeSensor => "negative tank sensor",
-        Fault::PositivePumpRunTime => "positive pump run time",
-        Fault::NegativePumpRunTime => "negative pump run time",
-        Fault::HostSilence => "host silent",
-    }
-}
-
 fn arm_state_words(s: ArmState) -> &'static str {
     match s {
         ArmState::Disarmed => "disarmed",
@@ -202,10 +190,15 @@ fn loop_words(r: &Result<StopReason, String>) -> String {
 pub fn event_log(r: &SimReport) -> String {
     let mut lines: Vec<(u64, String)> = Vec::new();
     for d in &r.disturbances {
+        let late = if d.t_onset_s > r.sim_s {
+            "; after the end of the run: not applied"
+        } else {
+            ""
+        };
         lines.push((
             (d.t_onset_s * 1e3) as u64,
             format!(
-                "poke onset: {} (finger {}), {:.1} N peak over {:.2} s",
+                "poke onset: {} (finger {}), {:.1} N peak over {:.2} s{late}",
                 poke_target(d.poke.target),
                 d.poke.finger,
                 d.poke.peak_n,
@@ -236,6 +229,23 @@ pub fn event_log(r: &SimReport) -> String {
     if let Some(t) = r.dropped_at_ms {
         lines.push((t, "object dropped".to_string()));
     }
+    let mcu = &r.mcu_at_end;
+    let faults: Vec<_> = mcu.faults.iter().map(|f| f.to_string()).collect();
+    let faults = if faults.is_empty() {
+        String::new()
+    } else {
+        format!(" (faults: {})", faults.join(", "))
+    };
+    // Last among the events of its millisecond (the sort is stable).
+    lines.push((
+        (r.sim_s * 1e3) as u64,
+        format!(
+            "end: outcome {}, {}, MCU {}{faults}",
+            r.outcome.name().replace('_', " "),
+            loop_words(&r.loop_result),
+            arm_state_words(mcu.state),
+        ),
+    ));
     lines.sort_by_key(|(t, _)| *t);
     let mut out = format!(
         "# dexitac sim: scenario {}, tactile feedback {}\n# valves: chamber 0..{}, + inflate, - deflate, . hold\n",
@@ -246,20 +256,6 @@ pub fn event_log(r: &SimReport) -> String {
     for (t, line) in lines {
         out.push_str(&format!("{:9.3} s  {line}\n", secs(t)));
     }
-    let mcu = &r.mcu_at_end;
-    let faults: Vec<_> = mcu.faults.iter().map(fault_words).collect();
-    let faults = if faults.is_empty() {
-        String::new()
-    } else {
-        format!(" (faults: {})", faults.join(", "))
-    };
-    out.push_str(&format!(
-        "{:9.3} s  end: outcome {}, {}, MCU {}{faults}\n",
-        r.sim_s,
-        r.outcome.name().replace('_', " "),
-        loop_words(&r.loop_result),
-        arm_state_words(mcu.state),
-    ));
     out
 }
 
@@ -647,7 +643,7 @@ mod tests {
     use crate::task_report::TaskReport;
     use dexitac_gripper::grasp::Decision;
     use dexitac_gripper::manipulation::TaskKind;
-    use dexitac_protocol::{FaultFlags, TankTargets, ValveState};
+    use dexitac_protocol::{Fault, FaultFlags, TankTargets, ValveState};
     use std::time::Duration;
 
     const HEADER: &str = "t_s,c0_x_mm,c0_y_mm,c1_x_mm,c1_y_mm,d0_mm,d1_mm,a0_mm,a1_mm,\
@@ -993,7 +989,11 @@ mod tests {
 
     #[test]
     fn event_log_is_for_people() {
-        let log = event_log(&report());
+        let mut r = report();
+        let mut late = r.disturbances[0];
+        late.t_onset_s = 1.5;
+        r.disturbances.push(late);
+        let log = event_log(&r);
         for debug in ["{", "}", "Some(", "None", "::", "Ok(", "Err(", "["] {
             assert!(!log.contains(debug), "{debug:?} in:\n{log}");
         }
@@ -1006,10 +1006,15 @@ mod tests {
             "    0.650 s  poke onset: back of the fingertip (finger 1), 4.5 N peak over 0.20 s",
             "    0.703 s  decision: reopen inflation (disturbance on sensor 0: frame shift 0.50 mm, anchored 0.50 mm; frame captured at 0.700 s)",
             "    0.903 s  command sent: vent all chambers, pumps off (release)",
-            "    1.000 s  end: outcome released, task loop stopped on request, MCU tripped (faults: host silent)",
+            "    1.000 s  end: outcome released, task loop stopped on request, MCU tripped (faults: host silent past the deadline)",
         ] {
             assert!(log.lines().any(|l| l == line), "{line:?} not in:\n{log}");
         }
+        // Time-ordered, the end included; a poke after it says so.
+        assert!(log.trim_end().ends_with(
+            "1.500 s  poke onset: back of the fingertip (finger 1), 4.5 N peak over 0.20 s; \
+             after the end of the run: not applied"
+        ));
     }
 
     #[test]
