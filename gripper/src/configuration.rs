@@ -12,7 +12,7 @@
 //! | [`Preset::ClosureGrip`] | Dex-Rot | vertical | "Dex external, Rot internal"; "the use of Dex-Rot makes the ClosureGrip more capable" |
 //! | [`Preset::PinchGrip`] | Rot-Dex | vertical | "Rot joint at the top and the Dex joint at the bottom" |
 //!
-//! The presets are embedded in the binary (`host/config/gripper/*.toml`);
+//! The presets are embedded in the binary (`gripper/presets/*.toml`);
 //! a user file has the same format, and every section except the top-level
 //! keys and `[[fingers]]` may be left out (it then takes the defaults).
 //!

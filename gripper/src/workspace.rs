@@ -25,7 +25,7 @@
 //! over a convex hull because the workspaces are not convex (the Rot-Dex
 //! set is a bent shell), so a hull would count empty space as reachable.
 //! The settings of `dexitac workspace` and the measured convergence are in
-//! `host/KINEMATICS.md`.
+//! `gripper/KINEMATICS.md`.
 
 use crate::actuator::{dex_state, rot_angle_rad, PressureError};
 use crate::configuration::{FingerType, GripperConfig};
@@ -40,7 +40,7 @@ pub const MIN_LEVELS: usize = 2;
 /// Most pressure levels per chamber.
 pub const MAX_LEVELS: usize = 1000;
 /// Most grid points: 2e8, about 4 s of [`volume`] in release
-/// (host/KINEMATICS.md).
+/// (gripper/KINEMATICS.md).
 pub const MAX_POINTS: u64 = 200_000_000;
 /// Smallest voxel edge, mm: keeps the occupancy bitmap below ~1 GB for a
 /// finger of 100 mm reach.
@@ -217,7 +217,7 @@ impl Grid {
     /// `gap_mm` apart. Each chamber step moves the tip by at most the reach
     /// times the joint rotation per step (plus the Dex extension per step);
     /// the measured gap is about 0.7 to 0.85 of that bound
-    /// (host/KINEMATICS.md), so the bound is set to `1.1 gap_mm`. Levels are
+    /// (gripper/KINEMATICS.md), so the bound is set to `1.1 gap_mm`. Levels are
     /// clamped to `MIN_LEVELS..=MAX_LEVELS`; [`volume`] reports the gap it
     /// measured.
     pub fn for_gap(config: &GripperConfig, gap_mm: f64) -> Self {
