@@ -87,7 +87,10 @@ fn workspace_never_reports_a_preset_of_the_other_finger_type_as_its_configuratio
     let report = run_workspace(dir.path(), "dex-rot", &["--preset", "pinchgrip"]);
     assert_eq!(report["finger"], "dex-rot");
     let config = report["config"].as_str().unwrap();
-    assert!(config.starts_with("dex-rot finger, joints of PinchGrip"), "{config}");
+    assert!(
+        config.starts_with("dex-rot finger, joints of PinchGrip"),
+        "{config}"
+    );
     assert!(config.contains("a rot-dex configuration"), "{config}");
     assert_eq!(report["subject"]["finger"], "dex-rot");
     assert_eq!(report["subject"]["joints_from"], "preset pinchgrip");

@@ -433,7 +433,9 @@ mod tests {
     #[test]
     fn for_finger_is_the_first_preset_with_that_finger() {
         for finger in [FingerType::DexRot, FingerType::RotDex] {
-            let first = Preset::ALL.into_iter().find(|p| p.config().finger == finger);
+            let first = Preset::ALL
+                .into_iter()
+                .find(|p| p.config().finger == finger);
             assert_eq!(Some(Preset::for_finger(finger)), first);
         }
     }

@@ -591,7 +591,10 @@ mod tests {
     fn the_subject_names_the_finger_computed_not_the_configs() {
         let hook = Preset::HookGrip.config();
         let s = Subject::new(FingerType::DexRot, &hook, "preset hookgrip");
-        assert_eq!(s.label(), "dex-rot finger, joints of HookGrip (preset hookgrip)");
+        assert_eq!(
+            s.label(),
+            "dex-rot finger, joints of HookGrip (preset hookgrip)"
+        );
         let s = Subject::new(FingerType::RotDex, &hook, "preset hookgrip");
         assert!(s.label().starts_with("rot-dex finger, joints of HookGrip"));
         assert!(s.label().contains("a dex-rot configuration"));

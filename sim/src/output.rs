@@ -69,7 +69,9 @@ pub fn write_all(report: &SimReport, dir: &Path) -> io::Result<()> {
     };
     file("events.log", &|w| w.write_all(event_log(report).as_bytes()))?;
     file("timeseries.csv", &|w| write_timeseries(report, w))?;
-    file("summary.json", &|w| w.write_all(summary_json(report)?.as_bytes()))?;
+    file("summary.json", &|w| {
+        w.write_all(summary_json(report)?.as_bytes())
+    })?;
     Ok(())
 }
 
@@ -404,7 +406,8 @@ pub fn write_timeseries(r: &SimReport, w: impl io::Write) -> io::Result<()> {
     for (i, w) in r.trace.iter().enumerate() {
         record.clear();
         record.push(cell(Some(secs(w.t_ms)), 3));
-        let frame = |sensor: usize| -> Option<&FrameShifts> { shifts[sensor].get(rows[sensor][i]?) };
+        let frame =
+            |sensor: usize| -> Option<&FrameShifts> { shifts[sensor].get(rows[sensor][i]?) };
         for sensor in 0..FINGER_COUNT {
             let c = frame(sensor).and_then(|f| f.centre_mm);
             record.push(cell(c.map(|c| c.x_mm), 3));
@@ -704,7 +707,16 @@ mod tests {
                 });
             }
         }
-        let decision = |t_ms, command, cause| (t_ms + 3, Decision { t_ms, command, cause });
+        let decision = |t_ms, command, cause| {
+            (
+                t_ms + 3,
+                Decision {
+                    t_ms,
+                    command,
+                    cause,
+                },
+            )
+        };
         let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
         chambers[0] = ValveState::Inflate;
         chambers[4] = ValveState::Deflate;
@@ -831,7 +843,10 @@ mod tests {
         assert!(v["wall_s"].is_null() && v["dropped_at_s"].is_null());
         let lat = &v["frame_to_command_ms"];
         assert_eq!(keys(lat), ["count", "median", "p99"]);
-        assert_eq!((lat["count"].as_u64(), lat["p99"].as_f64()), (Some(2), Some(1.4)));
+        assert_eq!(
+            (lat["count"].as_u64(), lat["p99"].as_f64()),
+            (Some(2), Some(1.4))
+        );
         let d = &v["disturbances"][0];
         assert_eq!(
             keys(d),

@@ -81,7 +81,10 @@ fn assert_series_shifts_match_the_causes(r: &SimReport) {
             .unwrap_or_else(|| panic!("no frame for {d:?}"));
         let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
         assert!(close(f.frame_shift_mm, frame_shift_mm), "{f:?} vs {d:?}");
-        assert!(close(f.anchored_shift_mm, anchored_shift_mm), "{f:?} vs {d:?}");
+        assert!(
+            close(f.anchored_shift_mm, anchored_shift_mm),
+            "{f:?} vs {d:?}"
+        );
         checked += 1;
     }
     assert!(checked > 0, "{:?}", r.decisions);
