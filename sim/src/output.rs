@@ -641,7 +641,7 @@ pub fn summary_json(r: &SimReport) -> serde_json::Result<String> {
 mod tests {
     use super::*;
     use crate::mcu::McuSnapshot;
-    use crate::plant::{ContactState, Poke, PokeShape};
+    use crate::plant::{ContactState, Plant, PlantParams, Poke, PokeShape, Trajectory};
     use crate::rig::{DisturbanceTiming, ObservationRecord, Outcome};
     use crate::task_report::TaskReport;
     use dexitac_gripper::grasp::Decision;
@@ -655,7 +655,15 @@ mod tests {
         tank_pos_kpa,tank_neg_kpa,external_n,grasp0_kpa,grasp1_kpa,normal0_n,normal1_n,\
         capacity_n,load_n,slide_mm,lift_mm,move_mm,object";
 
+    /// The plant at rest, then the fixture's values.
     fn world(t_ms: u64) -> WorldState {
+        let plant = Plant::new(
+            PlantParams::default(),
+            None,
+            &[],
+            Trajectory::default(),
+            Vec::new(),
+        );
         let touching = t_ms >= 200;
         let contact = ContactState {
             centre_mm: [0.5, -0.25],
@@ -666,20 +674,13 @@ mod tests {
         WorldState {
             t_ms,
             chambers_kpa: [10.0; CHAMBER_COUNT],
-            valves: [ValveState::Hold; CHAMBER_COUNT],
             // One row with a broken reading: an empty cell, not "NaN".
             tanks_kpa: (if t_ms == 450 { f64::NAN } else { 40.0 }, -45.0),
-            finger_deg: [0.0; FINGER_COUNT],
             contacts: [touching.then_some(contact), None],
             object: ObjectState::InGrasp,
-            slide_mm: 0.0,
             capacity_n: 3.0,
             load_n: 1.0,
-            external_n: 0.0,
-            gripper_mm: (0.0, 0.0),
-            manip_deg: [0.0; FINGER_COUNT],
-            object_deg: 0.0,
-            creep_x_mm: 0.0,
+            ..plant.state().clone()
         }
     }
 
