@@ -38,12 +38,9 @@
 //!
 //! **The anchor.** [`dexitac_gripper::grasp::Grasp`] sets each sensor's
 //! anchor to its latest centre when it seals. Here the anchors are set the
-//! same way from the recorded seal decisions: each sensor's latest centre at
-//! or before the frame time of the seal, applied to the frames after it,
-//! and dropped at a release. When both sensors captured a frame in the same
-//! millisecond as the sealing frame, the record does not say which one the
-//! grasp saw first, so the anchor may be one frame newer than the grasp's
-//! (both are inside T1 of each other, as the grasp was stable).
+//! same way from the recorded seal decisions, in the order the task loop
+//! saw the frames and the decisions ([`frame_shifts`]), and dropped at a
+//! release. Without tactile feedback there are no decisions, so no anchor.
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write as _};
@@ -276,64 +273,62 @@ pub struct FrameShifts {
     pub anchored_shift_mm: Option<f64>,
 }
 
-/// Every frame of each sensor, in capture order, with D and A (see the
-/// module docs for the anchor). Frames with a centre that is not finite
-/// are ignored for D and A, as [`dexitac_gripper::grasp::Grasp`] ignores
-/// them; their shifts are `None`.
+/// Every frame of each sensor, in the order the task loop reported them,
+/// with D and A as [`dexitac_gripper::grasp::Grasp`] computes them: D from
+/// the sensor's previous frame, A from the anchor. The anchors follow the
+/// recorded decisions, placed among the frames by
+/// [`SimReport::observations_before_decision`]: a seal makes each sensor's
+/// latest centre its anchor, a release drops them. Frames the grasp ignores
+/// (a centre that is not finite, or older than the sensor's previous frame)
+/// have no shifts.
 pub fn frame_shifts(r: &SimReport) -> [Vec<FrameShifts>; FINGER_COUNT] {
-    // Anchor changes from the decisions: (frame time, set (true) or drop).
-    let mut anchor_events: Vec<(u64, bool)> = r
+    // Anchor changes: (observations before, set (true) or drop).
+    let mut anchor_events: Vec<(usize, bool)> = r
         .decisions
         .iter()
-        .filter_map(|(_, d)| match d.command {
-            Command::Seal => Some((d.t_ms, true)),
-            Command::Release => Some((d.t_ms, false)),
+        .zip(&r.observations_before_decision)
+        .filter_map(|((_, d), &before)| match d.command {
+            Command::Seal => Some((before, true)),
+            Command::Release => Some((before, false)),
             Command::ReopenInflation => None,
         })
         .collect();
-    anchor_events.sort_by_key(|&(t, _)| t);
-    std::array::from_fn(|sensor| {
-        let frames: Vec<_> = r
-            .observations
-            .iter()
-            .filter(|o| o.sensor == sensor)
-            .collect();
-        let mut out = Vec::with_capacity(frames.len());
-        let (mut previous, mut anchor, mut latest) = (None, None, None);
-        let mut events = anchor_events.iter().peekable();
-        for (k, o) in frames.iter().enumerate() {
-            let centre = o.centre_mm;
-            let finite = centre.is_none_or(|c| c.x_mm.is_finite() && c.y_mm.is_finite());
-            let shifts = match centre {
-                Some(c) if finite => {
-                    let (d, a) = shifts_mm(c, previous, anchor);
-                    Some((d, anchor.map(|_| a)))
-                }
-                _ => None,
-            };
-            if finite {
-                previous = centre;
-                latest = centre;
-            }
-            out.push(FrameShifts {
-                t_ms: o.t_ms,
-                centre_mm: centre,
-                frame_shift_mm: shifts.map(|(d, _)| d),
-                anchored_shift_mm: shifts.and_then(|(_, a)| a),
-            });
-            // Anchor changes at this frame's time apply from the next frame,
-            // once every frame of this sensor up to that time is seen.
-            let next_t = frames.get(k + 1).map_or(u64::MAX, |n| n.t_ms);
-            while let Some(&&(t, set)) = events.peek() {
-                if t >= next_t {
-                    break;
-                }
-                anchor = if set { latest } else { None };
-                events.next();
-            }
+    anchor_events.sort_by_key(|&(before, _)| before);
+    let mut events = anchor_events.into_iter().peekable();
+    let mut out: [Vec<FrameShifts>; FINGER_COUNT] = Default::default();
+    let mut last_t_ms: [Option<u64>; FINGER_COUNT] = [None; FINGER_COUNT];
+    let mut last: [Option<CentreMm>; FINGER_COUNT] = [None; FINGER_COUNT];
+    let mut anchor: [Option<CentreMm>; FINGER_COUNT] = [None; FINGER_COUNT];
+    for (k, o) in r.observations.iter().enumerate() {
+        while let Some((_, set)) = events.next_if(|&(before, _)| before <= k) {
+            anchor = if set { last } else { [None; FINGER_COUNT] };
         }
-        out
-    })
+        let Some(frames) = out.get_mut(o.sensor) else {
+            continue;
+        };
+        let s = o.sensor;
+        let ignored = last_t_ms[s].is_some_and(|t| o.t_ms < t)
+            || o.centre_mm
+                .is_some_and(|c| !(c.x_mm.is_finite() && c.y_mm.is_finite()));
+        let shifts = match o.centre_mm {
+            Some(c) if !ignored => {
+                let (d, a) = shifts_mm(c, last[s], anchor[s]);
+                Some((d, anchor[s].map(|_| a)))
+            }
+            _ => None,
+        };
+        if !ignored {
+            last[s] = o.centre_mm;
+            last_t_ms[s] = Some(o.t_ms);
+        }
+        frames.push(FrameShifts {
+            t_ms: o.t_ms,
+            centre_mm: o.centre_mm,
+            frame_shift_mm: shifts.map(|(d, _)| d),
+            anchored_shift_mm: shifts.and_then(|(_, a)| a),
+        });
+    }
+    out
 }
 
 /// For each trace row, the index of the latest frame at or before it.
@@ -771,6 +766,9 @@ mod tests {
                 (503, HostMsg::SealAll, "stable: seal"),
                 (903, HostMsg::VentAll, "release"),
             ],
+            // After both 500 ms frames, after sensor 0's 700 ms frame, after
+            // sensor 1's 900 ms frame.
+            observations_before_decision: vec![12, 15, 20],
             frame_to_command: vec![Duration::from_micros(600), Duration::from_micros(1_400)],
             observations,
             trace: (0..10).map(|i| world(50 + 100 * i)).collect(),
