@@ -66,13 +66,40 @@ fn workspace_writes_points_views_and_volume() {
     }
 
     assert_eq!(report["finger"], "dex-rot");
-    assert_eq!(report["config"], "PinchGrip");
+    // The configuration reported is the one computed: a Dex-Rot finger with
+    // the joints of a Dex-Rot preset by default.
+    assert_eq!(
+        report["config"],
+        "dex-rot finger, joints of HookGrip (preset hookgrip)"
+    );
+    assert_eq!(report["subject"]["joints_config_finger"], "dex-rot");
     assert_eq!(report["point"], "joint-end");
     assert_eq!(report["points_csv"]["samples"], 256);
     let volume = report["volume"]["volume_mm3"].as_f64().unwrap();
     assert!(volume > 0.0);
     let size = &report["extents"]["size_mm"];
     assert!((0..3).all(|k| size[k].as_f64().unwrap() > 0.0));
+}
+
+#[test]
+fn workspace_never_reports_a_preset_of_the_other_finger_type_as_its_configuration() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = run_workspace(dir.path(), "dex-rot", &["--preset", "pinchgrip"]);
+    assert_eq!(report["finger"], "dex-rot");
+    let config = report["config"].as_str().unwrap();
+    assert!(
+        config.starts_with("dex-rot finger, joints of PinchGrip"),
+        "{config}"
+    );
+    assert!(config.contains("a rot-dex configuration"), "{config}");
+    assert_eq!(report["subject"]["finger"], "dex-rot");
+    assert_eq!(report["subject"]["joints_from"], "preset pinchgrip");
+    assert_eq!(report["subject"]["joints_config_finger"], "rot-dex");
+    let report = run_workspace(dir.path(), "rot-dex", &[]);
+    assert_eq!(
+        report["config"],
+        "rot-dex finger, joints of SupportGrip (preset supportgrip)"
+    );
 }
 
 #[test]

@@ -271,20 +271,48 @@ pub struct LineFit {
     pub points: usize,
 }
 
-/// Parses `pressure_kpa,angle_deg` rows. Blank lines and lines starting
-/// with `#` are skipped; a first line that is not numeric is a header.
+/// Parses `pressure_kpa,angle_deg` rows with the `csv` crate. Blank lines
+/// and lines starting with `#` are skipped; fields are trimmed; a first row
+/// of two fields that are not numbers is a header. Errors name the 1-based
+/// line and carry its text.
 pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>, FitError> {
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(text.as_bytes());
+    // The line's text as written, for the error.
+    let raw = |byte: u64| {
+        let start = usize::try_from(byte).unwrap_or(usize::MAX).min(text.len());
+        text.get(start..)
+            .and_then(|rest| rest.lines().next())
+            .unwrap_or_default()
+            .to_owned()
+    };
     let mut points = Vec::new();
     let mut seen_data_or_header = false;
-    for (index, raw) in text.lines().enumerate() {
-        let line = index + 1;
-        let trimmed = raw.trim();
-        if trimmed.is_empty() || trimmed.starts_with('#') {
+    for record in reader.records() {
+        let record = match record {
+            Ok(r) => r,
+            Err(e) => {
+                let (line, byte) = e.position().map_or((0, 0), |p| (p.line(), p.byte()));
+                return Err(FitError::BadRow {
+                    line: usize::try_from(line).unwrap_or(usize::MAX),
+                    content: raw(byte),
+                });
+            }
+        };
+        let (line, byte) = record.position().map_or((0, 0), |p| (p.line(), p.byte()));
+        let first = record.get(0).unwrap_or_default();
+        // Blank, or a comment after leading blanks (the reader's own
+        // comment rule takes `#` only in the first column).
+        if (record.len() == 1 && first.is_empty()) || first.starts_with('#') {
             continue;
         }
-        let fields: Vec<&str> = trimmed.split(',').map(str::trim).collect();
-        let parsed = match fields.as_slice() {
-            [a, b] => a.parse::<f64>().ok().zip(b.parse::<f64>().ok()),
+        let line = usize::try_from(line).unwrap_or(usize::MAX);
+        let parsed = match (record.len(), record.get(0), record.get(1)) {
+            (2, Some(a), Some(b)) => a.parse::<f64>().ok().zip(b.parse::<f64>().ok()),
             _ => None,
         };
         let is_first = !seen_data_or_header;
@@ -294,15 +322,15 @@ pub fn parse_csv(text: &str) -> Result<Vec<(f64, f64)>, FitError> {
             Some(_) => {
                 return Err(FitError::NotFinite {
                     line,
-                    content: raw.to_owned(),
+                    content: raw(byte),
                 })
             }
             // A non-numeric first row of two fields is the header.
-            None if is_first && fields.len() == 2 => {}
+            None if is_first && record.len() == 2 => {}
             None => {
                 return Err(FitError::BadRow {
                     line,
-                    content: raw.to_owned(),
+                    content: raw(byte),
                 })
             }
         }
@@ -471,6 +499,21 @@ mod tests {
         // A header is only allowed first.
         let err = parse_csv("1,2\np,a\n").unwrap_err();
         assert!(matches!(err, FitError::BadRow { line: 2, .. }));
+        // Line numbers count skipped lines; the content is the line as written.
+        let err = parse_csv("# c\n\n  \n1,2\n 3 , oops \n").unwrap_err();
+        assert_eq!(
+            err,
+            FitError::BadRow {
+                line: 5,
+                content: " 3 , oops ".into()
+            }
+        );
+    }
+
+    #[test]
+    fn csv_accepts_quoted_fields_and_crlf_line_ends() {
+        let text = "\"pressure_kpa\",\"angle_deg\"\r\n\"0\",1\r\n10,16\r\n";
+        assert_eq!(parse_csv(text).unwrap(), vec![(0.0, 1.0), (10.0, 16.0)]);
     }
 
     #[test]

@@ -36,7 +36,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::actuator::{DexActuator, PressureRange, RotActuator};
-use crate::kinematics::Transform;
+use crate::kinematics::{self, Transform};
 use dexitac_protocol::limits::{NEGATIVE_TANK_MIN_KPA, POSITIVE_TANK_MAX_KPA};
 use dexitac_protocol::CHAMBER_COUNT;
 
@@ -165,7 +165,7 @@ impl FingerMount {
     pub fn transform(&self) -> Transform {
         let [x, y, z] = self.position_mm;
         let [r, p, w] = self.rpy_deg.map(f64::to_radians);
-        Transform::translation(x, y, z).then(&Transform::from_rpy(r, p, w))
+        kinematics::translation(x, y, z) * kinematics::from_rpy(r, p, w)
     }
 }
 
@@ -237,6 +237,15 @@ impl Preset {
             Preset::SupportGrip => include_str!("../presets/supportgrip.toml"),
             Preset::ClosureGrip => include_str!("../presets/closuregrip.toml"),
             Preset::PinchGrip => include_str!("../presets/pinchgrip.toml"),
+        }
+    }
+
+    /// The first preset (in [`Preset::ALL`] order) whose fingers are of
+    /// type `finger`: HookGrip for Dex-Rot, SupportGrip for Rot-Dex.
+    pub fn for_finger(finger: FingerType) -> Preset {
+        match finger {
+            FingerType::DexRot => Preset::HookGrip,
+            FingerType::RotDex => Preset::SupportGrip,
         }
     }
 
@@ -428,6 +437,16 @@ mod tests {
     }
 
     #[test]
+    fn for_finger_is_the_first_preset_with_that_finger() {
+        for finger in [FingerType::DexRot, FingerType::RotDex] {
+            let first = Preset::ALL
+                .into_iter()
+                .find(|p| p.config().finger == finger);
+            assert_eq!(Some(Preset::for_finger(finger)), first);
+        }
+    }
+
+    #[test]
     fn presets_follow_the_paper() {
         use Assembly::*;
         use FingerType::*;
@@ -568,7 +587,7 @@ mod tests {
             }
             let bent = gripper_forward(&c, &p).unwrap();
             for (a, b) in rest.iter().zip(&bent) {
-                let (ra, rb) = (a.translation_mm, b.translation_mm);
+                let (ra, rb) = (a.translation.vector, b.translation.vector);
                 match c.assembly {
                     Assembly::Vertical => {
                         assert!((rb[0] - ra[0]) * ra[0].signum() < -1.0, "{preset:?}")

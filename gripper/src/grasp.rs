@@ -106,6 +106,28 @@ impl CentreMm {
     }
 }
 
+/// Algorithm 1's two shifts of one frame's contact centre, mm: the
+/// frame-to-frame shift D from the previous frame's centre and the anchored
+/// shift A from the anchor (the centre when the grasp was sealed). Each is 0
+/// when there is no previous centre (first frame of a contact) or no anchor.
+/// [`Grasp`] compares both with T1 and T2; `dexitac sim` writes them to its
+/// time series.
+///
+/// ```
+/// use dexitac_gripper::grasp::{shifts_mm, CentreMm};
+/// let c = |x_mm| CentreMm { x_mm, y_mm: 0.0 };
+/// assert_eq!(shifts_mm(c(1.0), Some(c(0.5)), Some(c(-1.0))), (0.5, 2.0));
+/// assert_eq!(shifts_mm(c(1.0), None, None), (0.0, 0.0));
+/// ```
+pub fn shifts_mm(
+    centre: CentreMm,
+    previous: Option<CentreMm>,
+    anchor: Option<CentreMm>,
+) -> (f64, f64) {
+    let from = |other: Option<CentreMm>| other.map_or(0.0, |o| centre.distance_mm(o));
+    (from(previous), from(anchor))
+}
+
 /// What a sensor's pipeline reported for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
@@ -216,8 +238,7 @@ impl SensorTrack {
             return None;
         };
         self.contact_since_ms.get_or_insert(obs.t_ms);
-        let frame_shift = self.last.map_or(0.0, |last| centre.distance_mm(last));
-        let anchored_shift = self.anchor.map_or(0.0, |anchor| centre.distance_mm(anchor));
+        let shifts = shifts_mm(centre, self.last, self.anchor);
         self.last = Some(centre);
         self.window.push_back((obs.t_ms, centre));
         while let Some(&(t, _)) = self.window.front() {
@@ -227,7 +248,7 @@ impl SensorTrack {
                 break;
             }
         }
-        Some((frame_shift, anchored_shift))
+        Some(shifts)
     }
 
     /// In contact for at least the span, and the span's centres fit in a box

@@ -27,114 +27,50 @@
 //! Units: lengths mm, angles rad inside (deg only in configs and outputs),
 //! pressures kPa.
 
+use nalgebra::{IsometryMatrix3, Matrix3, Rotation3, Translation3, Unit, Vector3};
+
 use crate::actuator::{self, DexState, PressureError};
 use crate::configuration::{FingerType, GripperConfig, JointGeometry};
 
-/// A rigid transform (rotation + translation): the top 3 rows of a 4x4
-/// homogeneous matrix `[R p; 0 0 0 1]`. Translation in mm.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Transform {
-    /// Rotation matrix, row-major.
-    pub rotation: [[f64; 3]; 3],
-    /// Translation, mm.
-    pub translation_mm: [f64; 3],
+/// A rigid transform: rotation matrix and translation (mm), the top three
+/// rows of a homogeneous matrix `[R p; 0 0 0 1]` ([`IsometryMatrix3`] of
+/// nalgebra, which keeps the rotation as a 3x3 matrix). `a * b` is `a`
+/// then `b` in `a`'s frame (post-multiplication, as along a kinematic
+/// chain); `t * point` maps a point of the child frame to the parent frame;
+/// `t.translation.vector` is the origin of the child frame in mm.
+pub type Transform = IsometryMatrix3<f64>;
+
+/// A pure translation, mm.
+pub fn translation(x_mm: f64, y_mm: f64, z_mm: f64) -> Transform {
+    Transform::from_parts(Translation3::new(x_mm, y_mm, z_mm), Rotation3::identity())
 }
 
-impl Transform {
-    /// The identity transform.
-    pub const IDENTITY: Transform = Transform {
-        rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        translation_mm: [0.0; 3],
-    };
+/// A pure rotation by `angle_rad` about a coordinate axis. For a unit
+/// coordinate axis nalgebra's axis-angle formula multiplies only by 0 and
+/// 1, so the matrix is the textbook `Rx`, `Ry` or `Rz` exactly.
+fn about(axis: Unit<Vector3<f64>>, angle_rad: f64) -> Transform {
+    Transform::from_parts(
+        Translation3::identity(),
+        Rotation3::from_axis_angle(&axis, angle_rad),
+    )
+}
 
-    /// A pure translation.
-    pub const fn translation(x_mm: f64, y_mm: f64, z_mm: f64) -> Self {
-        Transform {
-            rotation: Self::IDENTITY.rotation,
-            translation_mm: [x_mm, y_mm, z_mm],
-        }
-    }
+/// Rotation about the y axis by `angle_rad`.
+pub fn rot_y(angle_rad: f64) -> Transform {
+    about(Vector3::y_axis(), angle_rad)
+}
 
-    /// Rotation about the x axis by `angle_rad`.
-    pub fn rot_x(angle_rad: f64) -> Self {
-        let (s, c) = angle_rad.sin_cos();
-        Self::from_rotation([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
-    }
+/// Rotation about the z axis by `angle_rad`.
+pub fn rot_z(angle_rad: f64) -> Transform {
+    about(Vector3::z_axis(), angle_rad)
+}
 
-    /// Rotation about the y axis by `angle_rad`.
-    pub fn rot_y(angle_rad: f64) -> Self {
-        let (s, c) = angle_rad.sin_cos();
-        Self::from_rotation([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-    }
-
-    /// Rotation about the z axis by `angle_rad`.
-    pub fn rot_z(angle_rad: f64) -> Self {
-        let (s, c) = angle_rad.sin_cos();
-        Self::from_rotation([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    }
-
-    /// Roll-pitch-yaw: `Rz(yaw) * Ry(pitch) * Rx(roll)`, angles in rad.
-    pub fn from_rpy(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Self {
-        Self::rot_z(yaw_rad)
-            .then(&Self::rot_y(pitch_rad))
-            .then(&Self::rot_x(roll_rad))
-    }
-
-    const fn from_rotation(rotation: [[f64; 3]; 3]) -> Self {
-        Transform {
-            rotation,
-            translation_mm: [0.0; 3],
-        }
-    }
-
-    /// The product `self * next`: first `self`, then `next` in `self`'s
-    /// frame (post-multiplication, as along a kinematic chain).
-    pub fn then(&self, next: &Transform) -> Transform {
-        let a = &self.rotation;
-        let b = &next.rotation;
-        let mut rotation = [[0.0; 3]; 3];
-        for (i, row) in rotation.iter_mut().enumerate() {
-            for (j, cell) in row.iter_mut().enumerate() {
-                *cell = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-            }
-        }
-        let q = self.apply(next.translation_mm);
-        Transform {
-            rotation,
-            translation_mm: q,
-        }
-    }
-
-    /// Maps a point given in this transform's child frame to its parent frame.
-    pub fn apply(&self, point_mm: [f64; 3]) -> [f64; 3] {
-        let r = &self.rotation;
-        let p = point_mm;
-        let t = self.translation_mm;
-        [
-            r[0][0] * p[0] + r[0][1] * p[1] + r[0][2] * p[2] + t[0],
-            r[1][0] * p[0] + r[1][1] * p[1] + r[1][2] * p[2] + t[1],
-            r[2][0] * p[0] + r[2][1] * p[1] + r[2][2] * p[2] + t[2],
-        ]
-    }
-
-    /// The full 4x4 homogeneous matrix.
-    pub fn to_matrix(&self) -> [[f64; 4]; 4] {
-        let r = &self.rotation;
-        let t = self.translation_mm;
-        [
-            [r[0][0], r[0][1], r[0][2], t[0]],
-            [r[1][0], r[1][1], r[1][2], t[1]],
-            [r[2][0], r[2][1], r[2][2], t[2]],
-            [0.0, 0.0, 0.0, 1.0],
-        ]
-    }
-
-    /// The frame's z axis (third column of the rotation) in parent
-    /// coordinates: the finger's pointing direction at a fingertip pose.
-    pub fn z_axis(&self) -> [f64; 3] {
-        let r = &self.rotation;
-        [r[0][2], r[1][2], r[2][2]]
-    }
+/// Roll-pitch-yaw: `Rz(yaw) * Ry(pitch) * Rx(roll)`, angles in rad.
+pub fn from_rpy(roll_rad: f64, pitch_rad: f64, yaw_rad: f64) -> Transform {
+    Transform::from_parts(
+        Translation3::identity(),
+        Rotation3::from_euler_angles(roll_rad, pitch_rad, yaw_rad),
+    )
 }
 
 /// `sin(x) / x`, exact 1 at 0. Below |x| = 1e-4 the Taylor series
@@ -158,8 +94,8 @@ pub fn sinc(x: f64) -> f64 {
 /// use dexitac_gripper::kinematics::arc;
 /// let quarter = arc(26.0, std::f64::consts::FRAC_PI_2, 0.0);
 /// let r = 26.0 / std::f64::consts::FRAC_PI_2; // radius of curvature
-/// assert!((quarter.translation_mm[0] - r).abs() < 1e-12);
-/// assert!((quarter.translation_mm[2] - r).abs() < 1e-12);
+/// assert!((quarter.translation.vector.x - r).abs() < 1e-12);
+/// assert!((quarter.translation.vector.z - r).abs() < 1e-12);
 /// ```
 pub fn arc(length_mm: f64, theta_rad: f64, phi_rad: f64) -> Transform {
     let (sin_phi, cos_phi) = phi_rad.sin_cos();
@@ -184,14 +120,17 @@ fn arc_in_plane(length_mm: f64, theta_rad: f64, cos_phi: f64, sin_phi: f64) -> T
     let sin_t = 2.0 * sh * ch;
     let (c, s) = (cos_phi, sin_phi);
     let k = cos_t - 1.0;
-    Transform {
-        rotation: [
-            [1.0 + c * c * k, s * c * k, c * sin_t],
-            [s * c * k, 1.0 + s * s * k, s * sin_t],
-            [-c * sin_t, -s * sin_t, cos_t],
-        ],
-        translation_mm: [in_plane_mm * c, in_plane_mm * s, along_mm],
-    }
+    #[rustfmt::skip]
+    let rotation = Matrix3::new(
+        1.0 + c * c * k, s * c * k,       c * sin_t,
+        s * c * k,       1.0 + s * s * k, s * sin_t,
+        -c * sin_t,      -s * sin_t,      cos_t,
+    );
+    Transform::from_parts(
+        Translation3::new(in_plane_mm * c, in_plane_mm * s, along_mm),
+        // Orthonormal by construction (the tests check it).
+        Rotation3::from_matrix_unchecked(rotation),
+    )
 }
 
 /// The same arc as [`arc`], built as the product of elementary D-H style
@@ -199,11 +138,11 @@ fn arc_in_plane(length_mm: f64, theta_rad: f64, cos_phi: f64, sin_phi: f64) -> T
 /// `chord = length * sinc(theta/2)` (Webster & Jones 2010, Sec. 3.1.2).
 pub fn arc_dh_product(length_mm: f64, theta_rad: f64, phi_rad: f64) -> Transform {
     let chord_mm = length_mm * sinc(0.5 * theta_rad);
-    Transform::rot_z(phi_rad)
-        .then(&Transform::rot_y(0.5 * theta_rad))
-        .then(&Transform::translation(0.0, 0.0, chord_mm))
-        .then(&Transform::rot_y(0.5 * theta_rad))
-        .then(&Transform::rot_z(-phi_rad))
+    rot_z(phi_rad)
+        * rot_y(0.5 * theta_rad)
+        * translation(0.0, 0.0, chord_mm)
+        * rot_y(0.5 * theta_rad)
+        * rot_z(-phi_rad)
 }
 
 /// The joint variables of one finger.
@@ -249,26 +188,22 @@ pub fn fingertip_pose(
         FingerType::RotDex => (rot, dex),
         FingerType::DexRot => (dex, rot),
     };
-    base_part(geometry, &first).then(&tip_part(geometry, &second))
+    base_part(geometry, &first) * tip_part(geometry, &second)
 }
 
 /// The palm half of the chain: `Tz(t) * first joint`. The fingertip pose
 /// is `base_part(first) * tip_part(second)`; the workspace sampler
 /// precomputes each half once per joint state.
 pub fn base_part(geometry: &JointGeometry, first_joint: &Transform) -> Transform {
-    Transform::translation(0.0, 0.0, geometry.connector_thickness_mm).then(first_joint)
+    translation(0.0, 0.0, geometry.connector_thickness_mm) * first_joint
 }
 
 /// The tip half of the chain: `Tz(2 t) * second joint * Tz(t + fingertip)`.
 pub fn tip_part(geometry: &JointGeometry, second_joint: &Transform) -> Transform {
     let t_mm = geometry.connector_thickness_mm;
-    Transform::translation(0.0, 0.0, 2.0 * t_mm)
-        .then(second_joint)
-        .then(&Transform::translation(
-            0.0,
-            0.0,
-            t_mm + geometry.fingertip_length_mm,
-        ))
+    translation(0.0, 0.0, 2.0 * t_mm)
+        * second_joint
+        * translation(0.0, 0.0, t_mm + geometry.fingertip_length_mm)
 }
 
 /// Forward kinematics of one finger: Rot chamber and the three Dex chamber
@@ -302,7 +237,7 @@ pub fn gripper_forward(
             let pick = |chamber: usize| chamber_kpa[chamber];
             let dex_kpa = mount.dex_chambers.map(pick);
             let tip = finger_forward(config, config.finger, pick(mount.rot_chamber), dex_kpa)?;
-            Ok(mount.transform().then(&tip))
+            Ok(mount.transform() * tip)
         })
         .collect()
 }
@@ -310,6 +245,7 @@ pub fn gripper_forward(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use nalgebra::Point3;
     use proptest::prelude::*;
     use std::f64::consts::{FRAC_PI_2, PI};
 
@@ -317,43 +253,48 @@ mod tests {
         (a - b).abs() <= tol
     }
 
-    fn det(r: &[[f64; 3]; 3]) -> f64 {
-        r[0][0] * (r[1][1] * r[2][2] - r[1][2] * r[2][1])
-            - r[0][1] * (r[1][0] * r[2][2] - r[1][2] * r[2][0])
-            + r[0][2] * (r[1][0] * r[2][1] - r[1][1] * r[2][0])
-    }
-
-    fn assert_orthonormal(r: &[[f64; 3]; 3], tol: f64) {
+    fn assert_orthonormal(r: &Matrix3<f64>, tol: f64) {
+        let rrt = r * r.transpose();
         for i in 0..3 {
             for j in 0..3 {
-                let dot: f64 = (0..3).map(|k| r[i][k] * r[j][k]).sum();
+                let dot = rrt[(i, j)];
                 let want = if i == j { 1.0 } else { 0.0 };
                 assert!(close(dot, want, tol), "R R^T [{i}][{j}] = {dot}");
             }
         }
-        assert!(close(det(r), 1.0, tol), "det = {}", det(r));
+        assert!(
+            close(r.determinant(), 1.0, tol),
+            "det = {}",
+            r.determinant()
+        );
     }
 
     fn assert_transforms_close(a: &Transform, b: &Transform, tol: f64) {
-        let (ma, mb) = (a.to_matrix(), b.to_matrix());
+        let (ma, mb) = (a.to_homogeneous(), b.to_homogeneous());
         for i in 0..4 {
             for j in 0..4 {
                 assert!(
-                    close(ma[i][j], mb[i][j], tol),
+                    close(ma[(i, j)], mb[(i, j)], tol),
                     "[{i}][{j}]: {} vs {}",
-                    ma[i][j],
-                    mb[i][j]
+                    ma[(i, j)],
+                    mb[(i, j)]
                 );
             }
         }
+    }
+
+    /// The frame's z axis in parent coordinates: the finger's pointing
+    /// direction at a fingertip pose.
+    fn z_axis(t: &Transform) -> Vector3<f64> {
+        t.rotation * Vector3::z()
     }
 
     #[test]
     fn zero_curvature_gives_a_straight_joint_of_the_right_length() {
         for phi in [0.0, 1.0, -2.5] {
             let t = arc(26.0, 0.0, phi);
-            assert_eq!(t.translation_mm, [0.0, 0.0, 26.0]);
-            assert_transforms_close(&t, &Transform::translation(0.0, 0.0, 26.0), 1e-15);
+            assert_eq!(t.translation.vector, Vector3::new(0.0, 0.0, 26.0));
+            assert_transforms_close(&t, &translation(0.0, 0.0, 26.0), 1e-15);
         }
     }
 
@@ -367,8 +308,8 @@ mod tests {
             // 1 - cos(theta) cancels catastrophically for tiny theta, so
             // compare x against its leading term s*theta/2 there.
             let want_x = if theta < 1e-3 { 15.0 * theta } else { exact_x };
-            assert!(close(t.translation_mm[0], want_x, 1e-12 * 30.0));
-            assert!(close(t.translation_mm[2], exact_z, 1e-12 * 30.0));
+            assert!(close(t.translation.vector.x, want_x, 1e-12 * 30.0));
+            assert!(close(t.translation.vector.z, exact_z, 1e-12 * 30.0));
         }
     }
 
@@ -379,11 +320,11 @@ mod tests {
         let t = arc(l, theta, 0.0);
         let x = l / theta * (1.0 - theta.cos());
         let z = l / theta * theta.sin();
-        assert!(close(t.translation_mm[0], x, 1e-12));
-        assert!(close(t.translation_mm[1], 0.0, 1e-12));
-        assert!(close(t.translation_mm[2], z, 1e-12));
+        assert!(close(t.translation.vector.x, x, 1e-12));
+        assert!(close(t.translation.vector.y, 0.0, 1e-12));
+        assert!(close(t.translation.vector.z, z, 1e-12));
         // Tangent at the end points along +x.
-        let zt = t.z_axis();
+        let zt = z_axis(&t);
         assert!(close(zt[0], 1.0, 1e-12) && close(zt[2], 0.0, 1e-12));
     }
 
@@ -391,22 +332,26 @@ mod tests {
     fn half_circle_ends_one_diameter_to_the_side() {
         let l = 10.0 * PI; // radius 10 mm
         let t = arc(l, PI, FRAC_PI_2); // bend towards +y
-        assert!(close(t.translation_mm[0], 0.0, 1e-12));
-        assert!(close(t.translation_mm[1], 20.0, 1e-12));
-        assert!(close(t.translation_mm[2], 0.0, 1e-12));
+        assert!(close(t.translation.vector.x, 0.0, 1e-12));
+        assert!(close(t.translation.vector.y, 20.0, 1e-12));
+        assert!(close(t.translation.vector.z, 0.0, 1e-12));
     }
 
     #[test]
     fn full_circle_returns_to_the_start_pointing_the_same_way() {
         let t = arc(50.0, 2.0 * PI, 0.3);
-        assert_transforms_close(&t, &Transform::IDENTITY, 1e-12);
+        assert_transforms_close(&t, &Transform::identity(), 1e-12);
     }
 
     #[test]
     fn rpy_matches_the_elementary_rotations() {
-        let t = Transform::from_rpy(0.0, FRAC_PI_2, 0.0);
-        let z = t.z_axis();
+        let t = from_rpy(0.0, FRAC_PI_2, 0.0);
+        let z = z_axis(&t);
         assert!(close(z[0], 1.0, 1e-15) && close(z[2], 0.0, 1e-15));
+        // nalgebra's Euler angles are the same convention as the product.
+        let (roll, pitch, yaw) = (0.3, -1.1, 2.4);
+        let product = rot_z(yaw) * rot_y(pitch) * about(Vector3::x_axis(), roll);
+        assert_transforms_close(&from_rpy(roll, pitch, yaw), &product, 1e-15);
     }
 
     #[test]
@@ -418,20 +363,14 @@ mod tests {
             let length_mm = 91.0;
             for (mount, tip) in c.fingers.iter().zip(&tips) {
                 let base = mount.transform();
-                let axis = base.z_axis();
+                let axis = z_axis(&base);
                 for (k, a) in axis.iter().enumerate() {
-                    let want = base.translation_mm[k] + length_mm * a;
-                    assert!(close(tip.translation_mm[k], want, 1e-9), "{preset:?}");
+                    let want = base.translation.vector[k] + length_mm * a;
+                    assert!(close(tip.translation.vector[k], want, 1e-9), "{preset:?}");
                 }
                 assert_transforms_close(
-                    &Transform {
-                        translation_mm: [0.0; 3],
-                        ..*tip
-                    },
-                    &Transform {
-                        translation_mm: [0.0; 3],
-                        ..base
-                    },
+                    &Transform::from_parts(Translation3::identity(), tip.rotation),
+                    &Transform::from_parts(Translation3::identity(), base.rotation),
                     1e-12,
                 );
             }
@@ -456,8 +395,8 @@ mod tests {
             let c = crate::configuration::Preset::PinchGrip.config();
             let finger = if dex_rot { FingerType::DexRot } else { FingerType::RotDex };
             let t = finger_forward(&c, finger, p[0], [p[1], p[2], p[3]]).unwrap();
-            assert_orthonormal(&t.rotation, 1e-9);
-            let [x, y, z] = t.translation_mm;
+            assert_orthonormal(t.rotation.matrix(), 1e-9);
+            let [x, y, z]: [f64; 3] = t.translation.vector.into();
             prop_assert!((x * x + y * y + z * z).sqrt() <= crate::workspace::reach_mm(&c) + 1e-9);
             // Beyond the tank range the pose is the one at the limit.
             let clamp = |v: f64| v.clamp(c.pressure.min_kpa, c.pressure.max_kpa);
@@ -482,11 +421,11 @@ mod tests {
         fn composed_rotations_stay_orthonormal(
             angles in proptest::collection::vec((-10.0f64..10.0, -10.0f64..10.0, -10.0f64..10.0), 1..20),
         ) {
-            let mut t = Transform::IDENTITY;
+            let mut t = Transform::identity();
             for (a, b, c) in angles {
-                t = t.then(&arc(20.0, a, b)).then(&Transform::from_rpy(a, b, c));
+                t = t * arc(20.0, a, b) * from_rpy(a, b, c);
             }
-            assert_orthonormal(&t.rotation, 1e-9);
+            assert_orthonormal(t.rotation.matrix(), 1e-9);
         }
 
         #[test]
@@ -495,11 +434,12 @@ mod tests {
             p in proptest::array::uniform3(-100.0f64..100.0),
         ) {
             let ta = arc(26.0, a, b);
-            let tb = Transform::from_rpy(b, c, a).then(&Transform::translation(1.0, -2.0, 3.0));
+            let tb = from_rpy(b, c, a) * translation(1.0, -2.0, 3.0);
             let tc = arc(13.0, c, a);
-            assert_transforms_close(&ta.then(&tb).then(&tc), &ta.then(&tb.then(&tc)), 1e-9);
-            let direct = ta.then(&tb).apply(p);
-            let stepwise = ta.apply(tb.apply(p));
+            assert_transforms_close(&(ta * tb * tc), &(ta * (tb * tc)), 1e-9);
+            let p = Point3::from(p);
+            let direct = (ta * tb) * p;
+            let stepwise = ta * (tb * p);
             for k in 0..3 {
                 prop_assert!(close(direct[k], stepwise[k], 1e-9));
             }
@@ -512,7 +452,7 @@ mod tests {
             phi in -3.2f64..3.2,
         ) {
             let t = arc(length, theta, phi);
-            let [x, y, z] = t.translation_mm;
+            let [x, y, z]: [f64; 3] = t.translation.vector.into();
             let radius = length / theta;
             // Centre of curvature at radius * (cos phi, sin phi, 0).
             let (cx, cy) = (radius * phi.cos(), radius * phi.sin());

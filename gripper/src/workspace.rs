@@ -25,10 +25,12 @@
 //! over a convex hull because the workspaces are not convex (the Rot-Dex
 //! set is a bent shell), so a hull would count empty space as reachable.
 //! The settings of `dexitac workspace` and the measured convergence are in
-//! `host/KINEMATICS.md`.
+//! `gripper/KINEMATICS.md`.
 
 use crate::actuator::{dex_state, rot_angle_rad, PressureError};
 use crate::configuration::{FingerType, GripperConfig};
+use nalgebra::Point3;
+
 use crate::kinematics::{
     base_part, dex_transform, finger_forward, rot_transform, tip_part, Transform,
 };
@@ -38,7 +40,7 @@ pub const MIN_LEVELS: usize = 2;
 /// Most pressure levels per chamber.
 pub const MAX_LEVELS: usize = 1000;
 /// Most grid points: 2e8, about 4 s of [`volume`] in release
-/// (host/KINEMATICS.md).
+/// (gripper/KINEMATICS.md).
 pub const MAX_POINTS: u64 = 200_000_000;
 /// Smallest voxel edge, mm: keeps the occupancy bitmap below ~1 GB for a
 /// finger of 100 mm reach.
@@ -80,6 +82,68 @@ impl TipPoint {
             out.geometry.fingertip_length_mm = 0.0;
         }
         out
+    }
+}
+
+/// What a workspace is computed for: a finger type with the joints of a
+/// configuration. Only the configuration's joint geometry, actuator models
+/// and pressure range are used, in the assembly order of `finger`; its own
+/// finger type, assembly and palm mounts play no part (the workspace is in
+/// the finger's base frame). So a Dex-Rot workspace computed with the
+/// joints of a Rot-Dex preset is a Dex-Rot workspace, and is reported as
+/// one ([`Subject::label`]).
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize)]
+pub struct Subject {
+    /// The finger type computed (assembly order, palm to tip).
+    pub finger: FingerType,
+    /// Where the joints came from, e.g. `preset hookgrip` or a file path.
+    pub joints_from: String,
+    /// The name of the configuration the joints came from.
+    pub joints_config: String,
+    /// That configuration's own finger type, not used by the workspace.
+    pub joints_config_finger: FingerType,
+}
+
+impl Subject {
+    /// `finger` with the joints of `joints`, read from `joints_from`.
+    pub fn new(finger: FingerType, joints: &GripperConfig, joints_from: impl Into<String>) -> Self {
+        Subject {
+            finger,
+            joints_from: joints_from.into(),
+            joints_config: joints.name.clone(),
+            joints_config_finger: joints.finger,
+        }
+    }
+
+    /// One line for people, e.g. `dex-rot finger, joints of HookGrip
+    /// (preset hookgrip)`; names the configuration's own finger type when
+    /// it differs from the one computed.
+    ///
+    /// ```
+    /// use dexitac_gripper::configuration::{FingerType, Preset};
+    /// use dexitac_gripper::workspace::Subject;
+    /// let pinch = Preset::PinchGrip.config();
+    /// let s = Subject::new(FingerType::DexRot, &pinch, "preset pinchgrip");
+    /// assert_eq!(
+    ///     s.label(),
+    ///     "dex-rot finger, joints of PinchGrip (preset pinchgrip, a rot-dex configuration; its finger order is not used)"
+    /// );
+    /// ```
+    pub fn label(&self) -> String {
+        let other = if self.joints_config_finger == self.finger {
+            String::new()
+        } else {
+            format!(
+                ", a {} configuration; its finger order is not used",
+                self.joints_config_finger.name()
+            )
+        };
+        format!(
+            "{} finger, joints of {} ({}{other})",
+            self.finger.name(),
+            self.joints_config,
+            self.joints_from
+        )
     }
 }
 
@@ -153,7 +217,7 @@ impl Grid {
     /// `gap_mm` apart. Each chamber step moves the tip by at most the reach
     /// times the joint rotation per step (plus the Dex extension per step);
     /// the measured gap is about 0.7 to 0.85 of that bound
-    /// (host/KINEMATICS.md), so the bound is set to `1.1 gap_mm`. Levels are
+    /// (gripper/KINEMATICS.md), so the bound is set to `1.1 gap_mm`. Levels are
     /// clamped to `MIN_LEVELS..=MAX_LEVELS`; [`volume`] reports the gap it
     /// measured.
     pub fn for_gap(config: &GripperConfig, gap_mm: f64) -> Self {
@@ -220,7 +284,7 @@ pub fn sample(
                     out.push(Sample {
                         rot_kpa,
                         dex_kpa,
-                        tip_mm: tip.translation_mm,
+                        tip_mm: tip.translation.vector.into(),
                     });
                 }
             }
@@ -311,11 +375,11 @@ enum Halves {
     /// Rot-Dex: Rot half at the palm.
     RotFirst {
         rot: Vec<Transform>,
-        dex: Vec<[f64; 3]>,
+        dex: Vec<Point3<f64>>,
     },
     /// Dex-Rot: Dex half at the palm.
     DexFirst {
-        rot: Vec<[f64; 3]>,
+        rot: Vec<Point3<f64>>,
         dex: Vec<Transform>,
     },
 }
@@ -346,7 +410,7 @@ impl Halves {
         let tip = |joints: Vec<Transform>| {
             joints
                 .iter()
-                .map(|t| tip_part(g, t).translation_mm)
+                .map(|t| Point3::from(tip_part(g, t).translation.vector))
                 .collect()
         };
         Ok(match finger {
@@ -363,10 +427,11 @@ impl Halves {
 
     /// Fingertip position for Rot level `i` and Dex grid point `j`.
     fn tip(&self, i: usize, j: usize) -> [f64; 3] {
-        match self {
-            Halves::RotFirst { rot, dex } => rot[i].apply(dex[j]),
-            Halves::DexFirst { rot, dex } => dex[j].apply(rot[i]),
-        }
+        let tip = match self {
+            Halves::RotFirst { rot, dex } => rot[i] * dex[j],
+            Halves::DexFirst { rot, dex } => dex[j] * rot[i],
+        };
+        tip.coords.into()
     }
 }
 
@@ -520,6 +585,19 @@ mod tests {
                 assert_eq!(halves.tip(k / 27, k % 27), s.tip_mm, "{finger:?} {k}");
             }
         }
+    }
+
+    #[test]
+    fn the_subject_names_the_finger_computed_not_the_configs() {
+        let hook = Preset::HookGrip.config();
+        let s = Subject::new(FingerType::DexRot, &hook, "preset hookgrip");
+        assert_eq!(
+            s.label(),
+            "dex-rot finger, joints of HookGrip (preset hookgrip)"
+        );
+        let s = Subject::new(FingerType::RotDex, &hook, "preset hookgrip");
+        assert!(s.label().starts_with("rot-dex finger, joints of HookGrip"));
+        assert!(s.label().contains("a dex-rot configuration"));
     }
 
     #[test]

@@ -375,6 +375,28 @@ pub enum Fault {
     ClockFallback,
 }
 
+/// The fault in words, for people (logs, error messages).
+impl fmt::Display for Fault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Fault::PositiveOverLimit => "positive tank over its pressure limit",
+            Fault::NegativeOverLimit => "negative tank over its vacuum limit",
+            Fault::PositiveSensor => "positive tank sensor (or its supply) out of range",
+            Fault::NegativeSensor => "negative tank sensor (or its supply) out of range",
+            Fault::PositivePumpRunTime => "positive pump over its run-time limit",
+            Fault::NegativePumpRunTime => "negative pump over its run-time limit",
+            Fault::HostSilence => "host silent past the deadline",
+            Fault::PositivePumpNoRise => {
+                "positive pump ran but its tank did not rise (stuck sensor, dead pump, leak)"
+            }
+            Fault::NegativePumpNoRise => {
+                "negative pump ran but its tank did not fall (stuck sensor, dead pump, leak)"
+            }
+            Fault::ClockFallback => "crystal did not start: running on the internal clock",
+        })
+    }
+}
+
 impl Fault {
     /// Every fault, in wire order.
     pub const ALL: [Fault; 10] = [

@@ -140,7 +140,7 @@ pub enum RuntimeError {
     #[error("link: {0}")]
     Link(#[from] LinkError),
     /// The MCU tripped its safety loop.
-    #[error("the MCU tripped: {:?} at {} ms (tanks {} / {} Pa)", .0.fault, .0.time_ms, .0.positive_tank_pa, .0.negative_tank_pa)]
+    #[error("the MCU tripped: {} at {} ms (tanks {} / {} Pa)", .0.fault, .0.time_ms, .0.positive_tank_pa, .0.negative_tank_pa)]
     McuFault(FaultEvent),
     /// The MCU restarted during the run (it is disarmed, in its safe state).
     #[error("the MCU reset during the run")]

@@ -212,6 +212,11 @@ pub struct SimReport {
     pub disturbances: Vec<DisturbanceTiming>,
     /// Decisions of the grasp state machine: (handled at ms, decision).
     pub decisions: Vec<(u64, dexitac_gripper::grasp::Decision)>,
+    /// For each of `decisions`, how many of `observations` the task loop
+    /// had reported before it: a decision on a frame follows that frame's
+    /// observation, so this places it in the order the grasp saw the frames
+    /// ([`crate::output::frame_shifts`] sets the anchors with it).
+    pub observations_before_decision: Vec<usize>,
     /// Commands sent: (bytes written at ms, command, reason).
     pub commands: Vec<(u64, HostMsg, &'static str)>,
     /// Frame arrival -> command bytes written, for commands a frame decided.
@@ -546,6 +551,7 @@ fn status_line(s: &WorldState, phase: &str, centres: &[Option<CentreMm>; FINGER_
 #[derive(Default)]
 struct Collected {
     decisions: Vec<(u64, dexitac_gripper::grasp::Decision)>,
+    observations_before_decision: Vec<usize>,
     commands: Vec<(u64, HostMsg, &'static str)>,
     frame_to_command: Vec<Duration>,
     observations: Vec<ObservationRecord>,
@@ -588,6 +594,7 @@ fn collect(
                     markers: l.markers.clone(),
                 });
                 c.decisions.push((t_ms, decision));
+                c.observations_before_decision.push(c.observations.len());
             }
             RuntimeEvent::CommandSent {
                 t_ms,
@@ -685,6 +692,7 @@ fn build_report(
         time_to_stable_s,
         disturbances,
         decisions: c.decisions,
+        observations_before_decision: c.observations_before_decision,
         commands: c.commands,
         frame_to_command: c.frame_to_command,
         observations: c.observations,

@@ -47,8 +47,12 @@ pub struct TaskReport {
 /// constant-curvature arc of the actuator's length, then the fingertip
 /// along the bent axis, mm.
 pub fn fingertip_sway_mm(deg: f64) -> f64 {
-    let bend = dexitac_gripper::kinematics::arc(ACTUATOR_LENGTH_MM, deg.to_radians(), 0.0);
-    bend.apply([0.0, 0.0, FINGERTIP_LENGTH_MM])[0]
+    use dexitac_gripper::kinematics::{arc, translation};
+    let bend = arc(ACTUATOR_LENGTH_MM, deg.to_radians(), 0.0);
+    (bend * translation(0.0, 0.0, FINGERTIP_LENGTH_MM))
+        .translation
+        .vector
+        .x
 }
 
 fn max_deg(trace: &[WorldState], from_ms: u64, to_ms: u64) -> Option<f64> {

@@ -8,6 +8,7 @@ use std::sync::Mutex;
 
 use dexitac_gripper::grasp::{Cause, Command};
 use dexitac_protocol::{ArmState, ValveState, CHAMBER_COUNT};
+use dexitac_sim::output;
 use dexitac_sim::plant::PokeTarget;
 use dexitac_sim::rig::{run_scenario, Outcome, SimOptions, SimReport};
 use dexitac_sim::scenario::Scenario;
@@ -53,6 +54,40 @@ fn run(name: &str, tactile: bool) -> SimReport {
         [ValveState::Hold; CHAMBER_COUNT]
     );
     report
+}
+
+/// `timeseries.csv`'s D and A ([`output::frame_shifts`]) at each frame that
+/// raised a disturbance or a slip are the values the grasp reported.
+fn assert_series_shifts_match_the_causes(r: &SimReport) {
+    let shifts = output::frame_shifts(r);
+    let mut checked = 0;
+    for (_, d) in &r.decisions {
+        let (Cause::Disturbance {
+            sensor,
+            frame_shift_mm,
+            anchored_shift_mm,
+        }
+        | Cause::Slip {
+            sensor,
+            frame_shift_mm,
+            anchored_shift_mm,
+        }) = d.cause
+        else {
+            continue;
+        };
+        let f = shifts[sensor]
+            .iter()
+            .find(|f| f.t_ms == d.t_ms)
+            .unwrap_or_else(|| panic!("no frame for {d:?}"));
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
+        assert!(close(f.frame_shift_mm, frame_shift_mm), "{f:?} vs {d:?}");
+        assert!(
+            close(f.anchored_shift_mm, anchored_shift_mm),
+            "{f:?} vs {d:?}"
+        );
+        checked += 1;
+    }
+    assert!(checked > 0, "{:?}", r.decisions);
 }
 
 fn seals(r: &SimReport) -> Vec<u64> {
@@ -128,6 +163,7 @@ fn every_poke_is_detected_answered_by_reopening_then_resealed() {
         .decisions
         .iter()
         .all(|(_, d)| !matches!(d.cause, Cause::Slip { .. } | Cause::ContactLost { .. })));
+    assert_series_shifts_match_the_causes(&r);
 }
 
 #[test]
@@ -159,6 +195,7 @@ fn a_slip_beyond_t2_releases() {
     let (_, last) = r.decisions.last().expect("decisions");
     assert_eq!(last.command, Command::Release);
     assert!(matches!(last.cause, Cause::Slip { anchored_shift_mm, .. } if anchored_shift_mm > 5.0));
+    assert_series_shifts_match_the_causes(&r);
     // The release opened the fingers: grasping chambers deflated.
     assert!(r.transitions.iter().any(|(_, c)| r
         .grasp_chambers

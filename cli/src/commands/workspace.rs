@@ -167,18 +167,16 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
             reason: "must be 2..=40 (40^4 = 2.56 million CSV rows)",
         });
     }
-    let (base, source) = match (&args.config, args.preset) {
-        (Some(path), _) => (GripperConfig::load(path)?, path.display().to_string()),
-        (None, Some(p)) => {
-            let p = Preset::from(p);
-            (p.config(), format!("preset {}", p.name()))
-        }
-        // Every preset has the same joints; PinchGrip stands for them.
-        (None, None) => (Preset::PinchGrip.config(), "preset pinchgrip".into()),
+    let finger = FingerType::from(args.finger);
+    // Every preset has the same joints; by default one with the finger asked for.
+    let preset = args.preset.map_or(Preset::for_finger(finger), Preset::from);
+    let (base, source) = match &args.config {
+        Some(path) => (GripperConfig::load(path)?, path.display().to_string()),
+        None => (preset.config(), format!("preset {}", preset.name())),
     };
+    let subject = workspace::Subject::new(finger, &base, source);
     let point = TipPoint::from(args.point);
     let config = point.config(&base);
-    let finger = FingerType::from(args.finger);
     std::fs::create_dir_all(&args.out).map_err(|source| CliError::Io {
         path: args.out.clone(),
         source,
@@ -218,7 +216,7 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
         "samples": samples.len(),
         "extents": workspace::extents(samples.iter().map(|s| &s.tip_mm)),
     });
-    let json = workspace_json(&config, &source, finger, point, points_csv, &fine, &coarse);
+    let json = workspace_json(&config, &subject, point, points_csv, &fine, &coarse);
     let json_path = args.out.join(format!("{prefix}-workspace.json"));
     let text = serde_json::to_string_pretty(&json).map_err(|e| CliError::Io {
         path: json_path.clone(),
@@ -231,10 +229,9 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
 
     let e = &fine.extents;
     println!(
-        "{} finger ({}, {}): extents x {:.1}..{:.1}, y {:.1}..{:.1}, z {:.1}..{:.1} mm",
-        prefix,
+        "{}, {}: extents x {:.1}..{:.1}, y {:.1}..{:.1}, z {:.1}..{:.1} mm",
+        subject.label(),
         point_name(point),
-        source,
         e.min_mm[0],
         e.max_mm[0],
         e.min_mm[1],
@@ -278,21 +275,17 @@ fn extrapolate(fine: &VolumeEstimate, coarse: &VolumeEstimate) -> f64 {
 
 fn workspace_json(
     config: &GripperConfig,
-    source: &str,
-    finger: FingerType,
+    subject: &workspace::Subject,
     point: TipPoint,
     points_csv: serde_json::Value,
     fine: &VolumeEstimate,
     coarse: &VolumeEstimate,
 ) -> serde_json::Value {
     serde_json::json!({
-        "finger": finger,
+        "finger": subject.finger,
         "point": point,
-        "config": config.name,
-        "config_description": config.description,
-        "config_finger": config.finger,
-        "assembly": config.assembly,
-        "config_source": source,
+        "config": subject.label(),
+        "subject": subject,
         "frame": "finger base frame: z along the straight finger, Rot joint bending towards +x; mm",
         "pressure_range_kpa": [config.pressure.min_kpa, config.pressure.max_kpa],
         "extents": fine.extents,
