@@ -41,6 +41,9 @@
 //! same way from the recorded seal decisions, in the order the task loop
 //! saw the frames and the decisions ([`frame_shifts`]), and dropped at a
 //! release. Without tactile feedback there are no decisions, so no anchor.
+//! D is computed on every frame, also where the task loop does not feed the
+//! grasp (charging, a manipulation task) and across the start of closing,
+//! where the grasp forgets the previous frame (its D is 0 there).
 
 use std::fs::File;
 use std::io::{self, BufWriter, Write as _};
