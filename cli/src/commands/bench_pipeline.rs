@@ -100,10 +100,9 @@ fn run_inner(args: &BenchArgs) -> Result<(), String> {
     let _ = writeln!(report, "\n### Per scene\n\n{details}");
     print!("{report}");
     let colours: Vec<[u8; 3]> = COLOURS.iter().map(|c| c.0).collect();
-    let plot = dexitac_view::figures::pareto::pareto_plot(&pooled, &colours);
+    dexitac_view::figures::pareto::write(&pooled, &colours, &args.out_dir)
+        .map_err(|e| e.to_string())?;
     let png = args.out_dir.join("pareto.png");
-    plot.save(&png)
-        .map_err(|e| format!("cannot write {}: {e}", png.display()))?;
     std::fs::write(args.out_dir.join("results.md"), &report)
         .map_err(|e| format!("cannot write results.md: {e}"))?;
     eprintln!("bench-pipeline: wrote {} and results.md", png.display());

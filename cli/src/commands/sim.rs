@@ -135,9 +135,9 @@ pub fn run(args: &SimArgs) -> ExitCode {
         eprintln!("dexitac sim: {e}");
         return ExitCode::from(2);
     }
-    if let Err(e) = output::write_all(&report, &args.out)
-        .and_then(|()| dexitac_view::figures::sim_run::write_all(&report, &args.out))
-    {
+    if let Err(e) = output::write_all(&report, &args.out).and_then(|()| {
+        dexitac_view::figures::sim_run::write_all(&report, &args.out).map_err(std::io::Error::other)
+    }) {
         eprintln!("dexitac sim: writing {}: {e}", args.out.display());
         return ExitCode::from(2);
     }
