@@ -136,6 +136,8 @@ pub const FINGER_COLOURS: [RGBColor; 2] = [RGBColor(31, 119, 180), RGBColor(230,
 pub enum Mark {
     /// A solid line.
     Line,
+    /// A thin solid line.
+    Thin,
     /// A dashed line.
     Dashed,
     /// A filled box.
@@ -185,6 +187,10 @@ pub fn legend<DB: DrawingBackend>(
             Mark::Line => area.draw(&PathElement::new(
                 vec![(4, y + 7), (28, y + 7)],
                 c.stroke_width(3),
+            ))?,
+            Mark::Thin => area.draw(&PathElement::new(
+                vec![(4, y + 7), (28, y + 7)],
+                c.stroke_width(1),
             ))?,
             Mark::Dashed => {
                 for x in [4, 14, 24] {

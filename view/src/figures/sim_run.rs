@@ -40,7 +40,7 @@ use std::path::Path;
 use dexitac_gripper::grasp::{Command, SLIP_SHIFT_MM, STABLE_SHIFT_MM};
 use dexitac_gripper::manipulation::MANIPULATION_CHAMBERS;
 use dexitac_protocol::ValveState;
-use dexitac_sim::plant::{CHAMBERS_PER_FINGER, FINGER_COUNT};
+use dexitac_sim::plant::{PokeTarget, CHAMBERS_PER_FINGER, FINGER_COUNT};
 use dexitac_sim::rig::{SimReport, Snapshot};
 use dexitac_tactile::density;
 use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
@@ -124,7 +124,13 @@ enum Panel {
 
 impl RunFigure<'_> {
     fn panels(&self) -> Vec<Panel> {
-        let mut p = vec![Panel::Force, Panel::Shift, Panel::Valves, Panel::Pressure];
+        // A run without pokes (the manipulation tasks) has no force panel.
+        let poked = !self.report.disturbances.is_empty()
+            || self.report.trace.iter().any(|s| s.external_n > 0.0);
+        let mut p = vec![Panel::Shift, Panel::Valves, Panel::Pressure];
+        if poked {
+            p.insert(0, Panel::Force);
+        }
         if self.report.task.is_some() {
             p.push(Panel::Angles);
         }
@@ -197,13 +203,17 @@ impl Figure for RunFigure<'_> {
         for (k, (row, &panel)) in rows.iter().zip(&panels).enumerate() {
             let (plot, side) = row.split_horizontally(WIDTH_PX - LEGEND_PX);
             let bottom = k + 1 == panels.len();
-            let entries = match panel {
+            let mut entries = match panel {
                 Panel::Force => force_panel(&plot, r, &marks, t_max, bottom)?,
                 Panel::Shift => shift_panel(&plot, r, &marks, t_max, bottom)?,
                 Panel::Valves => valve_panel(&plot, r, &marks, t_max, bottom)?,
                 Panel::Pressure => pressure_panel(&plot, r, &marks, t_max, bottom)?,
                 Panel::Angles => angle_panel(&plot, r, &marks, t_max, bottom)?,
             };
+            // The time marks are explained once, in the first panel.
+            if k == 0 {
+                entries.extend(marks.entries());
+            }
             legend(&side, &entries, Some(BLACK))?;
         }
         Ok(())
@@ -265,7 +275,7 @@ where
     Y::CoordDescType: Ranged<ValueType = f64>,
 {
     let mut chart = ChartBuilder::on(area)
-        .margin_top(6)
+        .margin_top(10)
         .margin_right(16)
         .margin_left(6)
         .y_label_area_size(Y_LABELS_PX)
@@ -306,6 +316,7 @@ where
         .x_label_formatter(&|t| format!("{t:.0}"))
         .label_style(font(15))
         .axis_desc_style(font(16))
+        .max_light_lines(2)
         .light_line_style(RGBColor(240, 240, 240))
         .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
@@ -395,9 +406,18 @@ fn force_panel<DB: DrawingBackend>(
     mesh(&mut chart, "poke force (N)", &plain)?;
     let force = runs(r.trace.iter().map(|s| (secs(s.t_ms), Some(s.external_n))));
     draw_runs(&mut chart, force, POKE.stroke_width(2), false)?;
-    let mut entries = vec![LegendEntry::new("poke force", POKE, Mark::Line)];
-    entries.extend(marks.entries());
-    Ok(entries)
+    // Each poke's target above its peak, as the paper's panels (b)-(d).
+    let label = font(14).pos(Pos::new(HPos::Center, VPos::Bottom));
+    chart.draw_series(r.disturbances.iter().map(|d| {
+        let target = match d.poke.target {
+            PokeTarget::Object => "on the object",
+            PokeTarget::Actuator => "on a soft actuator",
+            PokeTarget::FingertipBack => "on a fingertip's back",
+        };
+        let at = (d.poke.at_s + 0.5 * d.poke.duration_s, d.poke.peak_n);
+        EmptyElement::at(at) + Text::new(target, (0, -4), label.clone())
+    }))?;
+    Ok(vec![LegendEntry::new("poke force", POKE, Mark::Line)])
 }
 
 /// Contact-centre shifts of one sensor: (D(t) frame to frame, A(t) from
@@ -473,12 +493,12 @@ fn shift_panel<DB: DrawingBackend>(
         entries.push(LegendEntry::new(
             format!("sensor {sensor}: D(t), frame to frame"),
             c,
-            Mark::Line,
+            Mark::Thin,
         ));
         entries.push(LegendEntry::new(
             format!("sensor {sensor}: A(t), from the anchor"),
             c,
-            Mark::Box,
+            Mark::Line,
         ));
     }
     for (name, v) in [("T1", STABLE_SHIFT_MM), ("T2", SLIP_SHIFT_MM)] {
@@ -590,6 +610,7 @@ fn valve_panel<DB: DrawingBackend>(
     chart
         .configure_mesh()
         .disable_y_mesh()
+        .max_light_lines(2)
         .x_desc("time (s)")
         .y_desc("valves")
         .x_labels(16)
@@ -665,6 +686,16 @@ fn pressure_panel<DB: DrawingBackend>(
     Ok(entries)
 }
 
+/// Line width of a finger's series: finger 0 wider, so that where both
+/// fingers have the same value (a symmetric grasp) both colours show.
+fn finger_width(finger: usize) -> u32 {
+    if finger == 0 {
+        5
+    } else {
+        2
+    }
+}
+
 fn angle_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     r: &SimReport,
@@ -684,7 +715,7 @@ fn angle_panel<DB: DrawingBackend>(
     for f in 0..FINGER_COUNT {
         let colour = FINGER_COLOURS[f % FINGER_COLOURS.len()];
         let a = runs(r.trace.iter().map(|s| (t(s), s.manip_deg.get(f).copied())));
-        draw_runs(&mut chart, a, colour.stroke_width(2), false)?;
+        draw_runs(&mut chart, a, colour.stroke_width(finger_width(f)), false)?;
         entries.push(LegendEntry::new(
             format!("finger {f}: manipulation joint"),
             colour,
@@ -767,7 +798,8 @@ impl HeatmapFigure<'_> {
             .disable_mesh()
             .x_desc("x (mm)")
             .y_desc("y (mm, down)")
-            .y_label_formatter(&|v| format!("{:.0}", -v))
+            // + 0.0: no "-0" at the origin.
+            .y_label_formatter(&|v| format!("{:.0}", -v + 0.0))
             .x_label_formatter(&|v| format!("{v:.0}"))
             .label_style(font(14))
             .axis_desc_style(font(15))
@@ -809,17 +841,208 @@ impl HeatmapFigure<'_> {
             .and_then(|o| o.centre_mm)
             .filter(|c| c.x_mm.is_finite() && c.y_mm.is_finite());
         if let Some(c) = centre {
-            let p = (c.x_mm, -c.y_mm);
-            chart.draw_series([
-                Cross::new(p, 9, BLACK.stroke_width(3)),
-                Cross::new(p, 7, WHITE.stroke_width(1)),
-            ])?;
-            chart.draw_series(std::iter::once(Text::new(
-                format!("centre ({:.1}, {:.1}) mm", c.x_mm, c.y_mm),
-                (c.x_mm + 0.6, -c.y_mm + 0.6),
-                font(14),
-            )))?;
+            let label = format!("centre ({:.1}, {:.1}) mm", c.x_mm, c.y_mm);
+            chart.draw_series(std::iter::once(
+                EmptyElement::at((c.x_mm, -c.y_mm))
+                    + Cross::new((0, 0), 9, BLACK.stroke_width(3))
+                    + Text::new(label, (-40, 16), font(14)),
+            ))?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::figures::test_support::check_figure;
+    use dexitac_gripper::grasp::{Cause, CentreMm, Decision};
+    use dexitac_protocol::{ArmState, FaultFlags, CHAMBER_COUNT};
+    use dexitac_sim::mcu::McuSnapshot;
+    use dexitac_sim::plant::{Plant, PlantParams, Trajectory, WorldState};
+    use dexitac_sim::rig::{ObservationRecord, Outcome};
+    use std::sync::Arc;
+    use std::time::Duration;
+
+    fn world(t_ms: u64) -> WorldState {
+        let plant = Plant::new(
+            PlantParams::default(),
+            None,
+            &[0, 1, 4, 5],
+            Trajectory::default(),
+            Vec::new(),
+        );
+        WorldState {
+            t_ms,
+            ..plant.state().clone()
+        }
+    }
+
+    fn report(trace: Vec<WorldState>, observations: Vec<ObservationRecord>) -> SimReport {
+        SimReport {
+            scenario: "probe".into(),
+            tactile_feedback: true,
+            outcome: Outcome::Held,
+            time_to_stable_s: None,
+            disturbances: Vec::new(),
+            decisions: Vec::new(),
+            commands: Vec::new(),
+            frame_to_command: Vec::new(),
+            observations,
+            trace,
+            transitions: Vec::new(),
+            dropped_at_ms: None,
+            snapshots: Vec::new(),
+            calibrations: Vec::new(),
+            loop_result: Err("test".into()),
+            mcu_at_end: McuSnapshot {
+                time_ms: 0,
+                chambers: [ValveState::Hold; CHAMBER_COUNT],
+                pumps: Default::default(),
+                tanks_pa: (0, 0),
+                chambers_pa: [0; CHAMBER_COUNT],
+                state: ArmState::default(),
+                faults: FaultFlags::default(),
+                frames_ok: 0,
+                frame_errors: 0,
+            },
+            link_stats: Default::default(),
+            max_loop_gap: Duration::ZERO,
+            grasp_chambers: vec![0, 1, 4, 5],
+            task: None,
+            sim_s: 0.0,
+            wall_s: 0.0,
+        }
+    }
+
+    fn observation(sensor: usize, t_ms: u64, x_mm: f64) -> ObservationRecord {
+        ObservationRecord {
+            sensor,
+            t_ms,
+            centre_mm: Some(CentreMm { x_mm, y_mm: 0.0 }),
+            pipeline_ms: 1.0,
+        }
+    }
+
+    const TEXTS: [&str; 8] = [
+        "Simulated run: probe",
+        "time (s)",
+        "centre shift (mm)",
+        "pressure (kPa)",
+        "T1 = 0.5 mm",
+        "T2 = 5 mm",
+        "+ tank",
+        "- tank",
+    ];
+
+    #[test]
+    fn the_run_figure_of_an_empty_report_has_its_axes_and_legends() {
+        let r = report(Vec::new(), Vec::new());
+        check_figure(&RunFigure { report: &r }, &TEXTS);
+    }
+
+    #[test]
+    fn the_run_figure_survives_one_sample_and_nan() {
+        let mut state = world(0);
+        state.tanks_kpa = (f64::NAN, f64::INFINITY);
+        state.chambers_kpa[0] = f64::NAN;
+        state.external_n = f64::NAN;
+        let obs = vec![observation(0, 0, f64::NAN)];
+        let r = report(vec![state], obs);
+        check_figure(&RunFigure { report: &r }, &TEXTS);
+    }
+
+    #[test]
+    fn the_run_figure_shows_pokes_lanes_and_both_tanks() {
+        let mut trace: Vec<WorldState> = (0..=100).map(|k| world(k * 100)).collect();
+        for s in &mut trace {
+            let t = secs(s.t_ms);
+            s.tanks_kpa = (40.0 * (t / 10.0), -45.0 * (t / 10.0));
+            s.external_n = if (4.0..5.0).contains(&t) { 3.0 } else { 0.0 };
+            if t > 2.0 {
+                s.valves[0] = ValveState::Inflate;
+            }
+        }
+        let obs = (0..100)
+            .flat_map(|k| {
+                [
+                    observation(0, k * 100, 0.01 * k as f64),
+                    observation(1, k * 100, 0.0),
+                ]
+            })
+            .collect();
+        let mut r = report(trace, obs);
+        r.decisions.push((
+            3_000,
+            Decision {
+                t_ms: 3_000,
+                command: Command::Seal,
+                cause: Cause::BothStable,
+            },
+        ));
+        r.dropped_at_ms = Some(9_000);
+        let figure = RunFigure { report: &r };
+        let img = check_figure(
+            &figure,
+            &[
+                "poke force (N)",
+                "f0 rot (0)",
+                "inflate (inlet open)",
+                "object dropped",
+            ],
+        );
+        // The two tanks are drawn in their own colours.
+        for c in [POSITIVE_TANK, NEGATIVE_TANK, INFLATE] {
+            let n = img.pixels().filter(|p| p.0 == [c.0, c.1, c.2]).count();
+            assert!(n > 100, "{c:?}: {n} px");
+        }
+        // Sensor 0 moves 0.01 mm per frame: A(t) from the seal at 3 s.
+        let (d, a) = shifts(&r, 0);
+        assert!(d
+            .iter()
+            .skip(1)
+            .all(|(_, v)| v.is_some_and(|v| (v - 0.01).abs() < 1e-9)));
+        assert!(a
+            .iter()
+            .take_while(|(t, _)| *t < 3.0)
+            .all(|(_, v)| v.is_none()));
+        assert!(a
+            .last()
+            .and_then(|(_, v)| *v)
+            .is_some_and(|v| (v - 0.69).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_heatmap_without_calibrations_or_markers_still_draws() {
+        let r = report(Vec::new(), Vec::new());
+        let snapshot = Snapshot {
+            t_ms: 1_500,
+            label: "seal".into(),
+            markers: [Arc::new(Vec::new()), Arc::new(Vec::new())],
+        };
+        let figure = HeatmapFigure {
+            report: &r,
+            snapshot: &snapshot,
+        };
+        check_figure(&figure, &["t = 1.50 s (seal)", "density / rest"]);
+    }
+
+    #[test]
+    fn valve_runs_cover_the_trace_and_lanes_include_changed_chambers() {
+        let mut trace: Vec<WorldState> = (0..10).map(|k| world(k * 1000)).collect();
+        for s in trace.iter_mut().skip(5) {
+            s.valves[2] = ValveState::Deflate;
+        }
+        let r = report(trace, Vec::new());
+        assert_eq!(lanes(&r), vec![0, 1, 2, 4, 5]);
+        assert_eq!(
+            valve_runs(&r, 2),
+            vec![
+                (0.0, 5.0, ValveState::Hold),
+                (5.0, 9.0, ValveState::Deflate)
+            ]
+        );
+        assert_eq!(chamber_name(2), "f0 dex side + (2)");
+        assert_eq!(chamber_name(7), "f1 dex side - (7)");
     }
 }
