@@ -214,7 +214,9 @@ pub fn legend<DB: DrawingBackend>(
 }
 
 /// Draws a vertical colour bar filling `area`: `lo..hi` upward, each value
-/// in `colour(value)`, with numbered ticks and `label` along the axis.
+/// in `colour(value)`, with numbered ticks and `label` on its right. (Left
+/// labels land on the bar in the bitmap backend: plotters 0.3.7 with
+/// `ab_glyph` places right-aligned text of narrow charts too far right.)
 pub fn colour_bar<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     (lo, hi): (f64, f64),
@@ -229,7 +231,8 @@ pub fn colour_bar<DB: DrawingBackend>(
     let mut chart = ChartBuilder::on(area)
         .margin(10)
         .margin_top(20)
-        .y_label_area_size(70)
+        .margin_left(30)
+        .right_y_label_area_size(75)
         .build_cartesian_2d(0.0..1.0, lo..hi)?;
     chart
         .configure_mesh()

@@ -742,7 +742,7 @@ const RATIO_MAX: f64 = 1.3;
 /// Size of one sensor's panel, px.
 const SENSOR_PANEL_PX: (u32, u32) = (520, 440);
 /// Width of the colour bar, px.
-const BAR_PX: u32 = 130;
+const BAR_PX: u32 = 150;
 
 impl Figure for HeatmapFigure<'_> {
     fn size_px(&self) -> (u32, u32) {

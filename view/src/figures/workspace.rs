@@ -151,6 +151,7 @@ impl WorkspaceFigure<'_> {
             .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style(font(self.px(15.0)))
             .axis_desc_style(font(self.px(16.0)))
+            .max_light_lines(4)
             .light_line_style(RGBColor(245, 245, 245))
             .bold_line_style(RGBColor(220, 220, 220))
             .draw()?;
@@ -251,7 +252,7 @@ impl Figure for WorkspaceFigure<'_> {
         };
         let title = format!("{}: {view}", self.title);
         let body = root.titled(&title, font(self.px(20.0)))?;
-        let (plot, bar) = body.split_horizontally(self.size_px.saturating_sub(self.px(110.0)));
+        let (plot, bar) = body.split_horizontally(self.size_px.saturating_sub(self.px(150.0)));
         let (pts, lo, hi) = self.finite();
         match self.view {
             View::Xy | View::Xz => self.planar(&plot, &pts, (lo, hi))?,
