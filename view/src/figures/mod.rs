@@ -19,6 +19,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use image::RgbImage;
+use plotters::chart::MeshStyle;
+use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -127,6 +129,22 @@ pub fn font(px: u32) -> TextStyle<'static> {
     (FAMILY, px).into_font().into()
 }
 
+/// The figures' mesh style: tick labels and axis names in [`font`], a light
+/// grid. Callers add the axis names, formatters and label counts.
+pub fn house_mesh<'m, 'a, 'b, X, Y, XT, YT, DB>(
+    mesh: &'m mut MeshStyle<'a, 'b, X, Y, DB>,
+) -> &'m mut MeshStyle<'a, 'b, X, Y, DB>
+where
+    X: Ranged<ValueType = XT> + ValueFormatter<XT>,
+    Y: Ranged<ValueType = YT> + ValueFormatter<YT>,
+    DB: DrawingBackend,
+{
+    mesh.label_style(font(15))
+        .axis_desc_style(font(16))
+        .light_line_style(RGBColor(242, 242, 242))
+        .bold_line_style(RGBColor(215, 215, 215))
+}
+
 /// Colour of each finger and its tactile sensor (finger 0 blue, finger 1
 /// orange), in every figure.
 pub const FINGER_COLOURS: [RGBColor; 2] = [RGBColor(31, 119, 180), RGBColor(230, 120, 10)];
@@ -223,10 +241,11 @@ pub fn colour_bar<DB: DrawingBackend>(
     label: &str,
     colour: &dyn Fn(f64) -> RGBColor,
 ) -> Result<(), FigureError> {
-    let (lo, hi) = if lo.is_finite() && hi.is_finite() && hi > lo {
-        (lo, hi)
-    } else {
-        (0.0, 1.0)
+    let (lo, hi) = match (lo.is_finite() && hi.is_finite(), hi > lo) {
+        (true, true) => (lo, hi),
+        // One value: a unit range around it.
+        (true, false) => (lo - 0.5, lo + 0.5),
+        (false, _) => (0.0, 1.0),
     };
     let mut chart = ChartBuilder::on(area)
         .margin(10)

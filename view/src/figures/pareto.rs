@@ -17,7 +17,7 @@ use dexitac_tactile::bench::Pooled;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use super::{font, legend, write_png_and_svg, Figure, FigureError, LegendEntry, Mark};
+use super::{font, house_mesh, legend, write_png_and_svg, Figure, FigureError, LegendEntry, Mark};
 
 /// Target median time per frame, ms.
 pub const TARGET_MS: f64 = 0.5;
@@ -82,16 +82,11 @@ impl Figure for ParetoFigure<'_> {
                 (TIME_MS.0..TIME_MS.1).log_scale(),
                 (ERROR_PX.0..ERROR_PX.1).log_scale(),
             )?;
-        chart
-            .configure_mesh()
+        house_mesh(&mut chart.configure_mesh())
             .x_desc("median total time per frame (ms, log)")
             .y_desc("centre error (px, log): nominal + edge + large")
             .x_label_formatter(&decade)
             .y_label_formatter(&decade)
-            .label_style(font(15))
-            .axis_desc_style(font(16))
-            .light_line_style(RGBColor(245, 245, 245))
-            .bold_line_style(RGBColor(210, 210, 210))
             .draw()?;
         let target = TARGET.stroke_width(2);
         chart.draw_series(LineSeries::new(

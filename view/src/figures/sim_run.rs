@@ -50,8 +50,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::{
-    colour_bar, font, legend, write_png, write_png_and_svg, Figure, FigureError, LegendEntry, Mark,
-    FINGER_COLOURS,
+    colour_bar, font, house_mesh, legend, write_png, write_png_and_svg, Figure, FigureError,
+    LegendEntry, Mark, FINGER_COLOURS,
 };
 use crate::raster::ratio_colour;
 
@@ -199,16 +199,20 @@ impl Figure for RunFigure<'_> {
         debug_assert!(y + TIME_AXIS_PX + TITLE_PX <= h);
         let rows = body.split_by_breakpoints::<u32, u32, _, _>([], breaks);
         let marks = TimeMarks::of(r);
-        let t_max = self.t_max_s();
         for (k, (row, &panel)) in rows.iter().zip(&panels).enumerate() {
             let (plot, side) = row.split_horizontally(WIDTH_PX - LEGEND_PX);
-            let bottom = k + 1 == panels.len();
+            let p = PanelContext {
+                r,
+                marks: &marks,
+                t_max: self.t_max_s(),
+                bottom: k + 1 == panels.len(),
+            };
             let mut entries = match panel {
-                Panel::Force => force_panel(&plot, r, &marks, t_max, bottom)?,
-                Panel::Shift => shift_panel(&plot, r, &marks, t_max, bottom)?,
-                Panel::Valves => valve_panel(&plot, r, &marks, t_max, bottom)?,
-                Panel::Pressure => pressure_panel(&plot, r, &marks, t_max, bottom)?,
-                Panel::Angles => angle_panel(&plot, r, &marks, t_max, bottom)?,
+                Panel::Force => force_panel(&plot, &p)?,
+                Panel::Shift => shift_panel(&plot, &p)?,
+                Panel::Valves => valve_panel(&plot, &p)?,
+                Panel::Pressure => pressure_panel(&plot, &p)?,
+                Panel::Angles => angle_panel(&plot, &p)?,
             };
             // The time marks are explained once, in the first panel.
             if k == 0 {
@@ -218,6 +222,16 @@ impl Figure for RunFigure<'_> {
         }
         Ok(())
     }
+}
+
+/// What every panel is drawn from.
+struct PanelContext<'a> {
+    r: &'a SimReport,
+    marks: &'a TimeMarks,
+    /// End of the time axis, s.
+    t_max: f64,
+    /// The bottom panel carries the time axis' labels.
+    bottom: bool,
 }
 
 /// The time marks every panel shows: response bands and the drop.
@@ -264,22 +278,21 @@ type TimeChart<'a, DB, Y> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>
 /// the bottom panel; the response bands and the drop line drawn first.
 fn time_chart<'a, DB, Y>(
     area: &'a DrawingArea<DB, Shift>,
-    t_max: f64,
+    p: &PanelContext<'_>,
     y: Y,
-    marks: &TimeMarks,
-    bottom: bool,
 ) -> Result<TimeChart<'a, DB, Y::CoordDescType>, FigureError>
 where
     DB: DrawingBackend,
     Y: AsRangedCoord<Value = f64>,
     Y::CoordDescType: Ranged<ValueType = f64>,
 {
+    let (t_max, marks) = (p.t_max, p.marks);
     let mut chart = ChartBuilder::on(area)
         .margin_top(10)
         .margin_right(16)
         .margin_left(6)
         .y_label_area_size(Y_LABELS_PX)
-        .x_label_area_size(if bottom { TIME_AXIS_PX } else { 0 })
+        .x_label_area_size(if p.bottom { TIME_AXIS_PX } else { 0 })
         .build_cartesian_2d(0.0..t_max, y)?;
     let y = chart.y_range();
     let (lo, hi) = (y.start, y.end);
@@ -306,19 +319,14 @@ where
     DB: DrawingBackend,
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart.configure_mesh())
         .x_desc("time (s)")
         .y_desc(y_desc)
         .x_labels(16)
         .y_labels(6)
         .y_label_formatter(y_format)
         .x_label_formatter(&|t| format!("{t:.0}"))
-        .label_style(font(15))
-        .axis_desc_style(font(16))
         .max_light_lines(2)
-        .light_line_style(RGBColor(240, 240, 240))
-        .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
     Ok(())
 }
@@ -396,13 +404,11 @@ where
 
 fn force_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    r: &SimReport,
-    marks: &TimeMarks,
-    t_max: f64,
-    bottom: bool,
+    p: &PanelContext<'_>,
 ) -> Result<Vec<LegendEntry>, FigureError> {
+    let r = p.r;
     let (_, hi) = range_of(r.trace.iter().map(|s| s.external_n), 0.0, 1.0);
-    let mut chart = time_chart(area, t_max, 0.0..hi.max(1.0) * 1.1, marks, bottom)?;
+    let mut chart = time_chart(area, p, 0.0..hi.max(1.0) * 1.1)?;
     mesh(&mut chart, "poke force (N)", &plain)?;
     let force = runs(r.trace.iter().map(|s| (secs(s.t_ms), Some(s.external_n))));
     draw_runs(&mut chart, force, POKE.stroke_width(2), false)?;
@@ -460,11 +466,9 @@ pub fn shifts(r: &SimReport, sensor: usize) -> (Vec<(f64, Option<f64>)>, Vec<(f6
 
 fn shift_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    r: &SimReport,
-    marks: &TimeMarks,
-    t_max: f64,
-    bottom: bool,
+    p: &PanelContext<'_>,
 ) -> Result<Vec<LegendEntry>, FigureError> {
+    let (r, t_max) = (p.r, p.t_max);
     let series: Vec<_> = (0..FINGER_COUNT).map(|s| shifts(r, s)).collect();
     let largest = series
         .iter()
@@ -473,7 +477,7 @@ fn shift_panel<DB: DrawingBackend>(
         .filter(|v| v.is_finite())
         .fold(0.0, f64::max);
     let hi = (largest * 1.05).max(SLIP_SHIFT_MM * 1.25);
-    let mut chart = time_chart(area, t_max, 0.0..hi, marks, bottom)?;
+    let mut chart = time_chart(area, p, 0.0..hi)?;
     mesh(&mut chart, "centre shift (mm)", &plain)?;
     let mut entries = Vec::new();
     for (sensor, (frame, anchored)) in series.into_iter().enumerate() {
@@ -508,12 +512,13 @@ fn shift_panel<DB: DrawingBackend>(
             6,
             GUIDE.stroke_width(2),
         ))?;
+        // At the left end: before the first contact there is no data.
         let style = font(15)
             .color(&GUIDE)
-            .pos(Pos::new(HPos::Right, VPos::Bottom));
+            .pos(Pos::new(HPos::Left, VPos::Bottom));
         chart.draw_series(std::iter::once(Text::new(
             format!("{name} = {v} mm"),
-            (t_max * 0.995, v),
+            (t_max * 0.005, v),
             style,
         )))?;
     }
@@ -590,16 +595,14 @@ fn valve_colour(state: ValveState) -> RGBColor {
 
 fn valve_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    r: &SimReport,
-    marks: &TimeMarks,
-    t_max: f64,
-    bottom: bool,
+    p: &PanelContext<'_>,
 ) -> Result<Vec<LegendEntry>, FigureError> {
+    let r = p.r;
     let lanes = lanes(r);
     let n = lanes.len().max(1);
     // Lane k (top to bottom) is centred on y = n - 1 - k; with at most n
     // labels, plotters puts them on the integers, one per lane.
-    let mut chart = time_chart(area, t_max, -0.5..n as f64 - 0.5, marks, bottom)?;
+    let mut chart = time_chart(area, p, -0.5..n as f64 - 0.5)?;
     let names: Vec<String> = lanes.iter().map(|&c| chamber_name(c)).collect();
     let lane_name = |y: &f64| {
         let k = n as f64 - 1.0 - y;
@@ -607,8 +610,7 @@ fn valve_panel<DB: DrawingBackend>(
         let name = on_lane.then(|| names.get(k.round() as usize)).flatten();
         name.cloned().unwrap_or_default()
     };
-    chart
-        .configure_mesh()
+    house_mesh(&mut chart.configure_mesh())
         .disable_y_mesh()
         .max_light_lines(2)
         .x_desc("time (s)")
@@ -617,10 +619,6 @@ fn valve_panel<DB: DrawingBackend>(
         .y_labels(n)
         .x_label_formatter(&|t| format!("{t:.0}"))
         .y_label_formatter(&lane_name)
-        .label_style(font(15))
-        .axis_desc_style(font(16))
-        .light_line_style(RGBColor(240, 240, 240))
-        .bold_line_style(RGBColor(215, 215, 215))
         .draw()?;
     for (k, &chamber) in lanes.iter().enumerate() {
         let centre = (n - 1 - k) as f64;
@@ -643,11 +641,9 @@ fn valve_panel<DB: DrawingBackend>(
 
 fn pressure_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    r: &SimReport,
-    marks: &TimeMarks,
-    t_max: f64,
-    bottom: bool,
+    p: &PanelContext<'_>,
 ) -> Result<Vec<LegendEntry>, FigureError> {
+    let r = p.r;
     let values = r.trace.iter().flat_map(|s| {
         let chambers = r
             .grasp_chambers
@@ -656,7 +652,7 @@ fn pressure_panel<DB: DrawingBackend>(
         [s.tanks_kpa.0, s.tanks_kpa.1].into_iter().chain(chambers)
     });
     let (lo, hi) = range_of(values, 0.05, 10.0);
-    let mut chart = time_chart(area, t_max, lo..hi, marks, bottom)?;
+    let mut chart = time_chart(area, p, lo..hi)?;
     mesh(&mut chart, "pressure (kPa)", &plain)?;
     let t = |s: &dexitac_sim::plant::WorldState| secs(s.t_ms);
     let positive = runs(r.trace.iter().map(|s| (t(s), Some(s.tanks_kpa.0))));
@@ -698,17 +694,15 @@ fn finger_width(finger: usize) -> u32 {
 
 fn angle_panel<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
-    r: &SimReport,
-    marks: &TimeMarks,
-    t_max: f64,
-    bottom: bool,
+    p: &PanelContext<'_>,
 ) -> Result<Vec<LegendEntry>, FigureError> {
+    let r = p.r;
     let values = r
         .trace
         .iter()
         .flat_map(|s| s.manip_deg.iter().copied().chain([s.object_deg]));
     let (lo, hi) = range_of(values, 0.08, 10.0);
-    let mut chart = time_chart(area, t_max, lo..hi, marks, bottom)?;
+    let mut chart = time_chart(area, p, lo..hi)?;
     mesh(&mut chart, "angle (deg)", &plain)?;
     let t = |s: &dexitac_sim::plant::WorldState| secs(s.t_ms);
     let mut entries = Vec::new();
@@ -793,16 +787,13 @@ impl HeatmapFigure<'_> {
             .x_label_area_size(40)
             .y_label_area_size(50)
             .build_cartesian_2d(-x_lim..x_lim, -y_lim..y_lim)?;
-        chart
-            .configure_mesh()
+        house_mesh(&mut chart.configure_mesh())
             .disable_mesh()
             .x_desc("x (mm)")
             .y_desc("y (mm, down)")
             // + 0.0: no "-0" at the origin.
             .y_label_formatter(&|v| format!("{:.0}", -v + 0.0))
             .x_label_formatter(&|v| format!("{v:.0}"))
-            .label_style(font(14))
-            .axis_desc_style(font(15))
             .draw()?;
         let Some(markers) = self.snapshot.markers.get(sensor) else {
             return Ok(());

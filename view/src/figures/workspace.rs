@@ -102,6 +102,17 @@ impl WorkspaceFigure<'_> {
         (pts, e.min_mm, e.max_mm)
     }
 
+    /// The colour scale: the range of the coloured coordinate over the
+    /// points (the origin not included), or `fallback` without points.
+    fn colour_range(&self, pts: &[[f64; 3]], fallback: (f64, f64)) -> (f64, f64) {
+        let (c, _) = self.view.colour_axis();
+        if pts.is_empty() {
+            return fallback;
+        }
+        let e = extents(pts.iter());
+        (e.min_mm[c], e.max_mm[c])
+    }
+
     /// Pixel scale of the figure's text and margins (1 at 800 px).
     fn scale(&self) -> f64 {
         (f64::from(self.size_px) / 800.0).clamp(0.25, 3.0)
@@ -159,7 +170,8 @@ impl WorkspaceFigure<'_> {
         chart.draw_series(LineSeries::new([(x.start, 0.0), (x.end, 0.0)], thin))?;
         chart.draw_series(LineSeries::new([(0.0, y.start), (0.0, y.end)], thin))?;
         let (c, _) = self.view.colour_axis();
-        let colour = |p: &[f64; 3]| depth_colour((p[c] - lo[c]) / (hi[c] - lo[c]).max(1e-9));
+        let (c_lo, c_hi) = self.colour_range(pts, (lo[c], hi[c]));
+        let colour = |p: &[f64; 3]| depth_colour((p[c] - c_lo) / (c_hi - c_lo).max(1e-9));
         // Far to near: looking down z, the highest points are nearest;
         // from the side (looking along +y), the smallest y.
         let mut order: Vec<&[f64; 3]> = pts.iter().collect();
@@ -208,24 +220,22 @@ impl WorkspaceFigure<'_> {
             .draw()?;
         let (xr, zr, yr) = (range(0), range(2), range(1));
         let name = font(self.px(17.0)).color(&BLACK);
+        // Each axis named beyond its end, clear of the tick labels (a
+        // pixel offset from the axis end).
+        let d = self.px(10.0) as i32;
         chart.draw_series([
-            Text::new(
-                "x (mm)",
-                (xr.end + pad(0), zr.start, yr.start),
-                name.clone(),
-            ),
-            Text::new(
-                "y (mm)",
-                (xr.start, zr.start, yr.end + 2.0 * pad(1)),
-                name.clone(),
-            ),
-            Text::new("z (mm)", (xr.start, zr.end + pad(2), yr.start), name),
+            EmptyElement::at((xr.end, zr.start, yr.start))
+                + Text::new("x (mm)", (d, 0), name.clone()),
+            EmptyElement::at((xr.start, zr.start, yr.end))
+                + Text::new("y (mm)", (-7 * d, -d), name.clone()),
+            EmptyElement::at((xr.start, zr.end, yr.start)) + Text::new("z (mm)", (0, -3 * d), name),
         ])?;
         let mut order: Vec<&[f64; 3]> = pts.iter().collect();
         // Far to near along the view direction (yaw about the vertical).
         let (s, c) = 0.6f64.sin_cos();
         order.sort_by(|p, q| (c * q[1] - s * q[0]).total_cmp(&(c * p[1] - s * p[0])));
-        let colour = |p: &[f64; 3]| depth_colour((p[2] - lo[2]) / (hi[2] - lo[2]).max(1e-9));
+        let (c_lo, c_hi) = self.colour_range(pts, (lo[2], hi[2]));
+        let colour = |p: &[f64; 3]| depth_colour((p[2] - c_lo) / (c_hi - c_lo).max(1e-9));
         let r = self.px(2.0);
         chart.draw_series(
             order
@@ -259,8 +269,9 @@ impl Figure for WorkspaceFigure<'_> {
             View::ThreeD => self.three_d(&plot, &pts, (lo, hi))?,
         }
         let (c, name) = self.view.colour_axis();
-        colour_bar(&bar, (lo[c], hi[c]), name, &|v| {
-            depth_colour((v - lo[c]) / (hi[c] - lo[c]).max(1e-9))
+        let (c_lo, c_hi) = self.colour_range(&pts, (lo[c], hi[c]));
+        colour_bar(&bar, (c_lo, c_hi), name, &|v| {
+            depth_colour((v - c_lo) / (c_hi - c_lo).max(1e-9))
         })
     }
 }
