@@ -24,8 +24,10 @@ pub const TARGET_MS: f64 = 0.5;
 /// Target centre error, px.
 pub const TARGET_PX: f64 = 1.0;
 
-const TIME_MS: (f64, f64) = (0.1, 1000.0);
-const ERROR_PX: (f64, f64) = (0.01, 1000.0);
+// A little beyond the decades, so that plotters labels the first one too.
+const TIME_MS: (f64, f64) = (0.09, 1100.0);
+const ERROR_PX: (f64, f64) = (0.009, 1100.0);
+const KEY: RGBColor = RGBColor(100, 100, 100);
 const TARGET: RGBColor = RGBColor(40, 150, 40);
 const LEGEND_PX: u32 = 340;
 
@@ -136,8 +138,8 @@ impl Figure for ParetoFigure<'_> {
             }
         }
         let mut entries = vec![
-            LegendEntry::new("settings: filled = median,", BLACK, Mark::Box),
-            LegendEntry::new("hollow = p95 error", BLACK, Mark::Hollow),
+            LegendEntry::new("settings: filled = median,", KEY, Mark::Box),
+            LegendEntry::new("hollow = p95 error", KEY, Mark::Hollow),
             LegendEntry::new("targets", TARGET, Mark::Line),
         ];
         entries.extend(self.rows.iter().enumerate().map(|(k, r)| {

@@ -426,10 +426,13 @@ fn force_panel<DB: DrawingBackend>(
     Ok(vec![LegendEntry::new("poke force", POKE, Mark::Line)])
 }
 
+/// A time series: (time s, value or `None` where there is none).
+pub type Series = Vec<(f64, Option<f64>)>;
+
 /// Contact-centre shifts of one sensor: (D(t) frame to frame, A(t) from
 /// the anchor), mm. The anchor is the sensor's last centre at or before
 /// the latest seal; A is missing before the first seal.
-pub fn shifts(r: &SimReport, sensor: usize) -> (Vec<(f64, Option<f64>)>, Vec<(f64, Option<f64>)>) {
+pub fn shifts(r: &SimReport, sensor: usize) -> (Series, Series) {
     let seals: Vec<u64> = r
         .decisions
         .iter()
