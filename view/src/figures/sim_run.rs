@@ -1,10 +1,11 @@
 //! Figures of a simulated run (`dexitac sim --out DIR`).
 //!
 //! **`plot.png` and `plot.svg`** ([`RunFigure`]) follow the paper's
-//! disturbance figure (Fig. 12e): stacked panels sharing the time axis (s),
-//! each with its legend in a column on the right:
+//! disturbance figure (its panel (e)): stacked panels sharing the time axis
+//! (s), each with its legend in a column on the right:
 //!
-//! 1. poke force (N), red;
+//! 1. poke force (N), red, each poke's target written above it (runs
+//!    without pokes, such as the manipulation tasks, leave this panel out);
 //! 2. contact-centre shift per sensor (mm, sensor 0 blue, sensor 1
 //!    orange): the frame-to-frame shift D(t) as a thin line and the shift
 //!    from the anchor (the centre when the grasp was last sealed) A(t) as a
@@ -22,8 +23,9 @@
 //!    and the object's tilt (deg).
 //!
 //! A light green band runs in every panel from each poke's onset to the
-//! valves opening in response (the paper's green response area), and a red
-//! vertical line marks where the object fell. The title names the
+//! valves opening in response (the paper's green response area; a thin
+//! band at the onset when the valves never opened), and a red vertical line
+//! marks where the object fell. The title names the
 //! scenario, the tactile feedback and the outcome.
 //!
 //! **Heatmaps** `heatmap_NN_<t>s_<event>.png` ([`HeatmapFigure`], at most
