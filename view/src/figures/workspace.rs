@@ -87,9 +87,16 @@ fn depth_colour(t: f64) -> RGBColor {
     )
 }
 
+/// The finite points and their extents with the origin included, mm.
+struct Cloud {
+    points: Vec<[f64; 3]>,
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
 impl WorkspaceFigure<'_> {
     /// The finite points, and their extents with the origin included.
-    fn finite(&self) -> (Vec<[f64; 3]>, [f64; 3], [f64; 3]) {
+    fn finite(&self) -> Cloud {
         let mut pts: Vec<[f64; 3]> = self
             .points
             .iter()
@@ -99,7 +106,11 @@ impl WorkspaceFigure<'_> {
         pts.push([0.0; 3]);
         let e = extents(pts.iter());
         pts.pop();
-        (pts, e.min_mm, e.max_mm)
+        Cloud {
+            points: pts,
+            lo: e.min_mm,
+            hi: e.max_mm,
+        }
     }
 
     /// The colour scale: the range of the coloured coordinate over the
@@ -125,9 +136,9 @@ impl WorkspaceFigure<'_> {
     fn planar<DB: DrawingBackend>(
         &self,
         area: &DrawingArea<DB, Shift>,
-        pts: &[[f64; 3]],
-        (lo, hi): ([f64; 3], [f64; 3]),
+        cloud: &Cloud,
     ) -> Result<(), FigureError> {
+        let (pts, lo, hi) = (&cloud.points[..], cloud.lo, cloud.hi);
         let (a, b, names) = match self.view {
             View::Xz => (0, 2, ("x (mm)", "z (mm)")),
             _ => (0, 1, ("x (mm)", "y (mm)")),
@@ -194,9 +205,9 @@ impl WorkspaceFigure<'_> {
     fn three_d<DB: DrawingBackend>(
         &self,
         area: &DrawingArea<DB, Shift>,
-        pts: &[[f64; 3]],
-        (lo, hi): ([f64; 3], [f64; 3]),
+        cloud: &Cloud,
     ) -> Result<(), FigureError> {
+        let (pts, lo, hi) = (&cloud.points[..], cloud.lo, cloud.hi);
         let pad = |k: usize| 0.05 * (hi[k] - lo[k]).max(1.0);
         let range = |k: usize| (lo[k] - pad(k))..(hi[k] + pad(k));
         // plotters' 3-D axes are (x, y up, z): our (x, z, y).
@@ -263,13 +274,14 @@ impl Figure for WorkspaceFigure<'_> {
         let title = format!("{}: {view}", self.title);
         let body = root.titled(&title, font(self.px(20.0)))?;
         let (plot, bar) = body.split_horizontally(self.size_px.saturating_sub(self.px(150.0)));
-        let (pts, lo, hi) = self.finite();
+        let cloud = self.finite();
         match self.view {
-            View::Xy | View::Xz => self.planar(&plot, &pts, (lo, hi))?,
-            View::ThreeD => self.three_d(&plot, &pts, (lo, hi))?,
+            View::Xy | View::Xz => self.planar(&plot, &cloud)?,
+            View::ThreeD => self.three_d(&plot, &cloud)?,
         }
+        let (pts, lo, hi) = (&cloud.points, cloud.lo, cloud.hi);
         let (c, name) = self.view.colour_axis();
-        let (c_lo, c_hi) = self.colour_range(&pts, (lo[c], hi[c]));
+        let (c_lo, c_hi) = self.colour_range(pts, (lo[c], hi[c]));
         colour_bar(&bar, (c_lo, c_hi), name, &|v| {
             depth_colour((v - c_lo) / (c_hi - c_lo).max(1e-9))
         })
