@@ -63,6 +63,8 @@ fn workspace_writes_points_views_and_volume() {
     for view in ["xy", "xz", "3d"] {
         let img = image::open(dir.path().join(format!("dex-rot-{view}.png"))).unwrap();
         assert_eq!((img.width(), img.height()), (96, 96));
+        let svg = std::fs::read_to_string(dir.path().join(format!("dex-rot-{view}.svg"))).unwrap();
+        assert!(svg.contains("dex-rot finger workspace") && svg.contains("x (mm)"));
     }
 
     assert_eq!(report["finger"], "dex-rot");

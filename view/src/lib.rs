@@ -19,9 +19,10 @@
 //! - [`snapshot`]: headless PNG snapshots;
 //! - [`live`]: the loop that feeds a dashboard from a channel and drives the
 //!   window and the snapshots;
-//! - [`raster`]: pixels, lines and the bitmap font they draw with;
+//! - [`raster`]: pixels, lines and the bitmap font the live view draws with;
 //! - [`figures`]: the simulated run's figure and heatmaps, the tactile
-//!   benchmark's Pareto plot, workspace views.
+//!   benchmark's Pareto plot, workspace views, drawn with `plotters` (PNG
+//!   and SVG, text in an embedded DejaVu Sans).
 //!
 //! # Why a native window
 //!

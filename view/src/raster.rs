@@ -1,10 +1,11 @@
 //! Raster drawing on `image` buffers: pixels, lines and a 3x5 bitmap font
-//! for the live view's dashboard and the figures.
+//! for the live view's dashboard (the figures draw with plotters, see
+//! [`crate::figures`]), and the density-ratio colour map both use.
 
 use image::{Rgb, RgbImage};
 
-/// A 3x5 pixel font for the plot's labels: digits, capitals and a few signs
-/// (also used by the live view, [`crate`]).
+/// A 3x5 pixel font for the live view's labels: digits, capitals and a few
+/// signs.
 fn glyph(c: char) -> [u8; 5] {
     // Each row: 3 bits, the leftmost pixel in bit 2.
     match c {
@@ -63,8 +64,7 @@ fn glyph(c: char) -> [u8; 5] {
 }
 
 /// Draws `text` (upper case) with its top-left at (x, y), `scale` px per
-/// font pixel (4 * scale px per character). Also used by the tactile
-/// benchmark's Pareto plot (`dexitac_tactile::bench::pareto_plot`) and the live view.
+/// font pixel (4 * scale px per character).
 pub fn text(img: &mut RgbImage, x: i64, y: i64, text: &str, scale: i64, c: Rgb<u8>) {
     for (i, ch) in text.chars().enumerate() {
         let rows = glyph(ch.to_ascii_uppercase());

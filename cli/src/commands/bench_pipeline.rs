@@ -128,13 +128,15 @@ fn run_inner(args: &BenchArgs) -> anyhow::Result<()> {
     let _ = writeln!(report, "\n### Per scene\n\n{details}");
     print!("{report}");
     let colours: Vec<[u8; 3]> = COLOURS.iter().map(|c| c.0).collect();
-    let plot = dexitac_view::figures::pareto::pareto_plot(&pooled, &colours);
+    dexitac_view::figures::pareto::write(&pooled, &colours, &args.out_dir)
+        .map_err(|e| anyhow!("{e}"))?;
     let png = args.out_dir.join("pareto.png");
-    plot.save(&png)
-        .map_err(|e| anyhow!("cannot write {}: {e}", png.display()))?;
     bar.finish_and_clear();
     std::fs::write(args.out_dir.join("results.md"), &report)
         .map_err(|e| anyhow!("cannot write results.md: {e}"))?;
-    tracing::info!("bench-pipeline: wrote {} and results.md", png.display());
+    tracing::info!(
+        "bench-pipeline: wrote {}, pareto.svg and results.md",
+        png.display()
+    );
     Ok(())
 }

@@ -140,7 +140,10 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
     let (report, view) = report?;
     recorded?;
     output::write_all(&report, &args.out)
-        .and_then(|()| dexitac_view::figures::sim_run::write_all(&report, &args.out))
+        .and_then(|()| {
+            dexitac_view::figures::sim_run::write_all(&report, &args.out)
+                .map_err(std::io::Error::other)
+        })
         .with_context(|| format!("writing {}", args.out.display()))?;
     println!(
         "scenario {}: outcome {}, time to stable {}, {} poke(s), wrote {}",

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use dexitac_gripper::configuration::{ConfigError, FingerType, GripperConfig, Preset};
 use dexitac_gripper::workspace::{self, Grid, TipPoint, VolumeEstimate, WorkspaceError};
-use dexitac_view::figures::workspace::{self as workspace_figure, View};
+use dexitac_view::figures::workspace::{self as workspace_figure, View, WorkspaceFigure};
 
 /// Error of `dexitac workspace`.
 #[derive(Debug, thiserror::Error)]
@@ -27,14 +27,9 @@ pub enum CliError {
         /// The I/O error.
         source: std::io::Error,
     },
-    /// A PNG could not be written.
-    #[error("{path}: {source}")]
-    Image {
-        /// The file.
-        path: PathBuf,
-        /// The encoder error.
-        source: image::ImageError,
-    },
+    /// A figure could not be drawn or written.
+    #[error(transparent)]
+    Figure(#[from] dexitac_view::figures::FigureError),
     /// A command-line value is out of range.
     #[error("--{arg}: {reason}")]
     Arg {
@@ -187,11 +182,20 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
     let csv_path = args.out.join(format!("{prefix}-points.csv"));
     write_points(&csv_path, &samples)?;
     let tips: Vec<[f64; 3]> = samples.iter().map(|s| s.tip_mm).collect();
-    for (view, name) in [(View::Xy, "xy"), (View::Xz, "xz"), (View::ThreeD, "3d")] {
-        let path = args.out.join(format!("{prefix}-{name}.png"));
-        workspace_figure::render(&tips, view, args.image_px)
-            .save(&path)
-            .map_err(|source| CliError::Image { path, source })?;
+    let tip = if point == TipPoint::Fingertip {
+        "fingertip"
+    } else {
+        "joint end"
+    };
+    let title = format!("{prefix} finger workspace ({}, {tip})", subject.joints_from);
+    for view in [View::Xy, View::Xz, View::ThreeD] {
+        let figure = WorkspaceFigure {
+            points: &tips,
+            view,
+            title: &title,
+            size_px: args.image_px,
+        };
+        workspace_figure::write(&figure, &args.out, &format!("{prefix}-{}", view.name()))?;
     }
 
     let started = Instant::now();

@@ -1,153 +1,161 @@
-//! The tactile benchmark's Pareto plot (`dexitac bench-pipeline`):
-//! accuracy against run time per pipeline setting.
+//! The tactile benchmark's Pareto plot (`dexitac bench-pipeline` writes
+//! `pareto.png` and `pareto.svg`): accuracy against run time per pipeline
+//! setting.
+//!
+//! x = median total time per frame (ms, log, 0.1-1000), y = centre error on
+//! the nominal, edge and large scenes (px, log, 0.01-1000), grid lines per
+//! decade with their values. Each setting has its colour: a filled square
+//! at its median error, a hollow one at its p95, its number next to the
+//! median; the legend on the right names the numbered settings in their
+//! colours. The targets ([`TARGET_MS`], [`TARGET_PX`]) are labelled green
+//! lines. Points outside the axes are clamped to their edge; a setting
+//! without a finite time or error has no point but keeps its legend row.
+
+use std::path::Path;
 
 use dexitac_tactile::bench::Pooled;
-use image::Rgb;
+use plotters::coord::Shift;
+use plotters::prelude::*;
 
-use crate::raster::text;
+use super::{font, house_mesh, legend, write_png_and_svg, Figure, FigureError, LegendEntry, Mark};
 
-/// The Pareto plot: x = median total time per frame (log, 0.1-1000 ms),
-/// y = centre error (log, 0.01-1000 px); a filled square per setting at its
-/// median error, a hollow one at its p95, numbered as in the legend on the
-/// right (setting names in their colours), the number next to the median; grid lines per decade with their
-/// values, the targets (0.5 ms, 1 px) as labelled green lines.
-pub fn pareto_plot(rows: &[Pooled], colours: &[[u8; 3]]) -> image::RgbImage {
-    let (w, h) = (1160u32, 560u32);
-    let (left, right, top, bottom) = (70.0, 690.0, 40.0, 500.0);
-    let mut img = image::RgbImage::from_pixel(w, h, Rgb([255, 255, 255]));
-    let x_of = |ms: f64| left + (ms.clamp(0.1, 1000.0).log10() + 1.0) / 4.0 * (right - left);
-    let y_of = |px: f64| bottom - (px.clamp(0.01, 1000.0).log10() + 2.0) / 5.0 * (bottom - top);
-    let line = |img: &mut image::RgbImage, x0: f64, y0: f64, x1: f64, y1: f64, c: [u8; 3]| {
-        let n = ((x1 - x0).abs().max((y1 - y0).abs()) as usize).max(1);
-        for k in 0..=n {
-            let t = k as f64 / n as f64;
-            let (x, y) = (x0 + t * (x1 - x0), y0 + t * (y1 - y0));
-            if x >= 0.0 && y >= 0.0 && (x as u32) < w && (y as u32) < h {
-                img.put_pixel(x as u32, y as u32, Rgb(c));
-            }
-        }
-    };
-    let black = Rgb([0, 0, 0]);
-    let grey = Rgb([90, 90, 90]);
-    let green = [60, 170, 60];
-    // 4 * scale px per character, 5 * scale px high.
-    let width_of = |s: &str, scale: i64| s.chars().count() as i64 * 4 * scale;
-    for (d, label) in ["0.1", "1", "10", "100", "1000"].iter().enumerate() {
-        let x = x_of(10f64.powi(d as i32 - 1));
-        line(&mut img, x, top, x, bottom, [210, 210, 210]);
-        text(
-            &mut img,
-            x as i64 - width_of(label, 2) / 2,
-            bottom as i64 + 8,
-            label,
-            2,
-            grey,
-        );
+/// Target median time per frame, ms.
+pub const TARGET_MS: f64 = 0.5;
+/// Target centre error, px.
+pub const TARGET_PX: f64 = 1.0;
+
+// A little beyond the decades, so that plotters labels the first one too.
+const TIME_MS: (f64, f64) = (0.09, 1100.0);
+const ERROR_PX: (f64, f64) = (0.009, 1100.0);
+const KEY: RGBColor = RGBColor(100, 100, 100);
+const TARGET: RGBColor = RGBColor(40, 150, 40);
+const LEGEND_PX: u32 = 340;
+
+/// The Pareto plot of the pooled benchmark rows, one colour per row.
+#[derive(Debug, Clone, Copy)]
+pub struct ParetoFigure<'a> {
+    /// One row per setting.
+    pub rows: &'a [Pooled],
+    /// The settings' colours (RGB), in row order; rows without one are grey.
+    pub colours: &'a [[u8; 3]],
+}
+
+/// Writes `pareto.png` and `pareto.svg` into `dir`.
+pub fn write(rows: &[Pooled], colours: &[[u8; 3]], dir: &Path) -> Result<(), FigureError> {
+    write_png_and_svg(&ParetoFigure { rows, colours }, dir, "pareto")
+}
+
+impl ParetoFigure<'_> {
+    fn colour(&self, k: usize) -> RGBColor {
+        let [r, g, b] = self.colours.get(k).copied().unwrap_or([128, 128, 128]);
+        RGBColor(r, g, b)
     }
-    for (d, label) in ["0.01", "0.1", "1", "10", "100", "1000"].iter().enumerate() {
-        let y = y_of(10f64.powi(d as i32 - 2));
-        line(&mut img, left, y, right, y, [210, 210, 210]);
-        text(
-            &mut img,
-            left as i64 - 6 - width_of(label, 2),
-            y as i64 - 5,
-            label,
-            2,
-            grey,
-        );
+}
+
+/// A decade's label: 0.01, 0.1, 1, 10, ...
+fn decade(v: &f64) -> String {
+    if *v >= 1.0 {
+        format!("{v:.0}")
+    } else {
+        let digits = (-v.log10()).ceil().max(0.0) as usize;
+        format!("{v:.digits$}")
     }
-    // Targets: 0.5 ms and 1 px.
-    line(&mut img, x_of(0.5), top, x_of(0.5), bottom, green);
-    line(&mut img, left, y_of(1.0), right, y_of(1.0), green);
-    text(
-        &mut img,
-        x_of(0.5) as i64 + 4,
-        top as i64 + 4,
-        "target 0.5 ms",
-        2,
-        Rgb(green),
-    );
-    let t1 = "target 1 px";
-    text(
-        &mut img,
-        right as i64 - width_of(t1, 2) - 4,
-        y_of(1.0) as i64 - 14,
-        t1,
-        2,
-        Rgb(green),
-    );
-    line(&mut img, left, bottom, right, bottom, [0, 0, 0]);
-    line(&mut img, left, top, left, bottom, [0, 0, 0]);
-    let x_label = "median total time per frame, ms (log)";
-    text(
-        &mut img,
-        ((left + right) / 2.0) as i64 - width_of(x_label, 2) / 2,
-        bottom as i64 + 30,
-        x_label,
-        2,
-        black,
-    );
-    text(
-        &mut img,
-        8,
-        12,
-        "centre error, px (log): nominal + edge + large",
-        2,
-        black,
-    );
-    let square = |img: &mut image::RgbImage, x: f64, y: f64, filled: bool, c: [u8; 3]| {
-        for dy in -5i32..=5 {
-            for dx in -5i32..=5 {
-                let edge = dx.abs() == 5 || dy.abs() == 5;
-                if filled || edge {
-                    let (px, py) = (x as i32 + dx, y as i32 + dy);
-                    if px >= 0 && py >= 0 && (px as u32) < w && (py as u32) < h {
-                        img.put_pixel(px as u32, py as u32, Rgb(c));
-                    }
-                }
-            }
-        }
-    };
-    for (k, (r, c)) in rows.iter().zip(colours).enumerate() {
-        let x = x_of(r.total_median_ms);
-        for (err, filled) in [(r.error_median_px, true), (r.error_p95_px, false)] {
-            if !err.is_finite() || !x.is_finite() {
+}
+
+impl Figure for ParetoFigure<'_> {
+    fn size_px(&self) -> (u32, u32) {
+        let rows = 3 + self.rows.len() as u32;
+        (1180, (rows * 20 + 120).max(620))
+    }
+
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), FigureError> {
+        let (w, _) = self.size_px();
+        let body = root.titled(
+            "Tactile pipeline settings: time against centre error (640x480)",
+            font(22),
+        )?;
+        let (plot, side) = body.split_horizontally(w - LEGEND_PX);
+        let mut chart = ChartBuilder::on(&plot)
+            .margin(12)
+            .margin_right(24)
+            .x_label_area_size(55)
+            .y_label_area_size(80)
+            .build_cartesian_2d(
+                (TIME_MS.0..TIME_MS.1).log_scale(),
+                (ERROR_PX.0..ERROR_PX.1).log_scale(),
+            )?;
+        house_mesh(&mut chart.configure_mesh())
+            .x_desc("median total time per frame (ms, log)")
+            .y_desc("centre error (px, log): nominal + edge + large")
+            .x_label_formatter(&decade)
+            .y_label_formatter(&decade)
+            .draw()?;
+        let target = TARGET.stroke_width(2);
+        chart.draw_series(LineSeries::new(
+            [(TARGET_MS, ERROR_PX.0), (TARGET_MS, ERROR_PX.1)],
+            target,
+        ))?;
+        chart.draw_series(LineSeries::new(
+            [(TIME_MS.0, TARGET_PX), (TIME_MS.1, TARGET_PX)],
+            target,
+        ))?;
+        let label = font(15).color(&TARGET);
+        chart.draw_series([
+            Text::new(
+                format!("target {TARGET_MS} ms"),
+                (TARGET_MS * 1.08, ERROR_PX.1 / 1.6),
+                label.clone(),
+            ),
+            Text::new(
+                format!("target {TARGET_PX} px"),
+                (TIME_MS.1 / 9.0, TARGET_PX * 1.6),
+                label,
+            ),
+        ])?;
+        let clamp = |v: f64, (lo, hi): (f64, f64)| v.is_finite().then(|| v.clamp(lo, hi));
+        for (k, r) in self.rows.iter().enumerate() {
+            let c = self.colour(k);
+            let Some(x) = clamp(r.total_median_ms, TIME_MS) else {
                 continue;
+            };
+            if let Some(p95) = clamp(r.error_p95_px, ERROR_PX) {
+                chart.draw_series(std::iter::once(
+                    EmptyElement::at((x, p95))
+                        + Rectangle::new([(-6, -6), (6, 6)], c.stroke_width(2)),
+                ))?;
             }
-            let y = y_of(err);
-            square(&mut img, x, y, filled, *c);
-            if !filled {
-                continue;
+            if let Some(median) = clamp(r.error_median_px, ERROR_PX) {
+                // Neighbours put their numbers on alternate sides, so that
+                // clustered settings stay readable.
+                let dx = if k % 2 == 0 { 10 } else { -22 };
+                let dy = if k % 4 < 2 { -22 } else { 8 };
+                let number = font(15).color(&c);
+                chart.draw_series(std::iter::once(
+                    EmptyElement::at((x, median))
+                        + Rectangle::new([(-6, -6), (6, 6)], c.filled())
+                        + Text::new((k + 1).to_string(), (dx, dy), number),
+                ))?;
             }
-            // The setting's number next to its median; neighbours alternate
-            // sides so that clustered settings stay readable.
-            let n = (k + 1).to_string();
-            let dx = if k % 2 == 0 { 9 } else { -9 - width_of(&n, 2) };
-            let dy = if k % 4 < 2 { -16 } else { 6 };
-            text(&mut img, x as i64 + dx, y as i64 + dy, &n, 2, Rgb(*c));
         }
+        let mut entries = vec![
+            LegendEntry::new("settings: filled = median,", KEY, Mark::Box),
+            LegendEntry::new("hollow = p95 error", KEY, Mark::Hollow),
+            LegendEntry::new("targets", TARGET, Mark::Line),
+        ];
+        entries.extend(self.rows.iter().enumerate().map(|(k, r)| {
+            LegendEntry::new(format!("{} {}", k + 1, r.name), self.colour(k), Mark::Box)
+        }));
+        legend(&side.margin(30, 0, 0, 0), &entries, None)
     }
-    // Legend.
-    let (lx, mut ly) = (right as i64 + 24, top as i64);
-    text(&mut img, lx, ly, "settings (filled = median,", 2, black);
-    text(&mut img, lx, ly + 14, "hollow = p95):", 2, black);
-    ly += 40;
-    for (k, (r, c)) in rows.iter().zip(colours).enumerate() {
-        square(&mut img, lx as f64 + 5.0, ly as f64 + 4.0, true, *c);
-        let label = format!("{} {}", k + 1, r.name);
-        text(&mut img, lx + 16, ly, &label, 2, Rgb(*c));
-        ly += 22;
-    }
-    img
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::figures::test_support::check_figure;
 
-    #[test]
-    fn pareto_plot_has_labels_in_each_setting_colour() {
-        let row = |name, ms, err| Pooled {
+    fn row(name: &'static str, ms: f64, err: f64) -> Pooled {
+        Pooled {
             name,
             error_median_px: err,
             error_p95_px: 3.0 * err,
@@ -157,28 +165,59 @@ mod tests {
             total_median_ms: ms,
             contact_median_ms: ms,
             no_contact_median_ms: ms,
-        };
+        }
+    }
+
+    #[test]
+    fn pareto_plot_has_a_legend_row_in_each_setting_colour_and_labels() {
         let rows = [
             row("slow", 40.0, 0.05),
             row("fast", 0.4, f64::NAN),
             row("odd", f64::INFINITY, 1e9),
         ];
         let colours = [[200, 0, 0], [0, 0, 220], [0, 160, 160]];
-        let img = pareto_plot(&rows, &colours);
-        // The legend (right of the plot area) names every setting in its
+        let figure = ParetoFigure {
+            rows: &rows,
+            colours: &colours,
+        };
+        let img = check_figure(
+            &figure,
+            &[
+                "1 slow",
+                "2 fast",
+                "3 odd",
+                "target 0.5 ms",
+                "target 1 px",
+                "median total time per frame (ms, log)",
+                "centre error (px, log)",
+            ],
+        );
+        // The legend (right of the plot area) marks every setting in its
         // colour, even one without a finite point.
+        let (w, _) = figure.size_px();
         for c in colours {
             let legend = img
                 .enumerate_pixels()
-                .filter(|(x, _, p)| *x > 700 && p.0 == c)
+                .filter(|(x, _, p)| *x > w - LEGEND_PX && p.0 == c)
                 .count();
-            assert!(legend > 50, "{c:?}: {legend} px");
+            assert!(legend > 150, "{c:?}: {legend} px");
         }
-        // Axis and target labels: dark text below the x axis.
-        let below_axis = img
+        // The only point (setting 1, 40 ms) is drawn: its filled square.
+        let red_in_plot = img
             .enumerate_pixels()
-            .filter(|(x, y, p)| *x < 690 && *y > 505 && p.0 == [0, 0, 0])
+            .filter(|(x, _, p)| *x < w - LEGEND_PX && p.0 == colours[0])
             .count();
-        assert!(below_axis > 100, "{below_axis}");
+        assert!(red_in_plot > 100, "{red_in_plot}");
+    }
+
+    #[test]
+    fn pareto_plot_of_no_settings_still_has_axes_and_targets() {
+        check_figure(
+            &ParetoFigure {
+                rows: &[],
+                colours: &[],
+            },
+            &["target 0.5 ms", "Tactile pipeline settings"],
+        );
     }
 }
