@@ -39,7 +39,7 @@
 
 use std::path::Path;
 
-use dexitac_gripper::grasp::{Command, SLIP_SHIFT_MM, STABLE_SHIFT_MM};
+use dexitac_gripper::grasp::{SLIP_SHIFT_MM, STABLE_SHIFT_MM};
 use dexitac_gripper::manipulation::MANIPULATION_CHAMBERS;
 use dexitac_protocol::ValveState;
 use dexitac_sim::plant::{PokeTarget, CHAMBERS_PER_FINGER, FINGER_COUNT};
@@ -831,7 +831,7 @@ impl HeatmapFigure<'_> {
 mod tests {
     use super::*;
     use crate::figures::test_support::check_figure;
-    use dexitac_gripper::grasp::{Cause, CentreMm, Decision};
+    use dexitac_gripper::grasp::{Cause, CentreMm, Command, Decision};
     use dexitac_protocol::{ArmState, FaultFlags, CHAMBER_COUNT};
     use dexitac_sim::mcu::McuSnapshot;
     use dexitac_sim::plant::{Plant, PlantParams, Trajectory, WorldState};
