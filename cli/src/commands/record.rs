@@ -71,6 +71,7 @@ fn record_inner(args: &RecordArgs) -> anyhow::Result<()> {
     )?
     .spawn();
     let clock = Clock::wall();
+    let spinner = crate::shared::progress::spinner("recording (Ctrl-C stops)");
     let results = dexitac_rig::sensor_loop::sensor_threads(
         sensors,
         clock,
@@ -78,6 +79,7 @@ fn record_inner(args: &RecordArgs) -> anyhow::Result<()> {
         &stop,
         &recorder.sender(),
     );
+    spinner.finish_and_clear();
     let stats = recorder.finish().map_err(|e| anyhow!("recording: {e}"))?;
     crate::shared::sources::print_camera_stats("record", &cameras);
     for r in &results {

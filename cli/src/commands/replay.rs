@@ -101,8 +101,10 @@ fn replay_inner(args: &ReplayArgs) -> anyhow::Result<bool> {
         ),
         (None, None) => (Params::default(), "default parameters".to_string()),
     };
+    let spinner = crate::shared::progress::spinner("replaying the recording's frames");
     let out = replay::replay(&recording, &params, args.rest_frames as usize)
         .map_err(|e| anyhow!("{e}"))?;
+    spinner.finish_and_clear();
     if let Some(path) = &args.out {
         write_csv(path, &out)?;
     }

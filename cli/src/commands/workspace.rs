@@ -3,6 +3,7 @@
 //! `dexitac_gripper::{configuration, kinematics, workspace}`.
 
 use crate::exit::Outcome;
+use crate::shared::progress;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -178,7 +179,10 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
     })?;
     let prefix = finger.name();
 
+    // Steps: sample, three views, two volumes.
+    let bar = progress::bar(6, "steps");
     let samples = workspace::sample(&config, finger, Grid::uniform(args.levels))?;
+    bar.inc(1);
     let csv_path = args.out.join(format!("{prefix}-points.csv"));
     write_points(&csv_path, &samples)?;
     let tips: Vec<[f64; 3]> = samples.iter().map(|s| s.tip_mm).collect();
@@ -196,6 +200,7 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
             size_px: args.image_px,
         };
         workspace_figure::write(&figure, &args.out, &format!("{prefix}-{}", view.name()))?;
+        bar.inc(1);
     }
 
     let started = Instant::now();
@@ -205,6 +210,7 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
         Grid::for_gap(&config, args.voxel_mm),
         args.voxel_mm,
     )?;
+    bar.inc(1);
     let coarse_mm = 2.0 * args.voxel_mm;
     let coarse = workspace::volume(
         &config,
@@ -212,6 +218,7 @@ fn run_workspace(args: &WorkspaceArgs) -> Result<(), CliError> {
         Grid::for_gap(&config, coarse_mm),
         coarse_mm,
     )?;
+    bar.finish_and_clear();
     let elapsed_s = started.elapsed().as_secs_f64();
 
     let points_csv = serde_json::json!({
