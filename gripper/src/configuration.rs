@@ -119,6 +119,16 @@ pub enum Assembly {
     Vertical,
 }
 
+impl Assembly {
+    /// The name used in configs.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Assembly::Horizontal => "horizontal",
+            Assembly::Vertical => "vertical",
+        }
+    }
+}
+
 /// Fixed geometry of a finger's joints and links.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]

@@ -21,7 +21,7 @@
 //! ```
 //! use dexitac_rig::config::RigConfig;
 //! let rig: RigConfig = RigConfig::from_toml_str("[tanks]\npositive_kpa = 35.0\n", "example").unwrap();
-//! assert_eq!(rig.control().unwrap().tank_targets_pa.0, 35_000);
+//! assert_eq!(rig.control().tank_targets_pa.0, 35_000);
 //! let err = RigConfig::<dexitac_rig::config::NoScenario>::from_toml_str("[tanks]\npositive = 35.0\n", "example")
 //!     .unwrap_err();
 //! assert!(err.to_string().contains("line 2"), "{err}");
@@ -41,7 +41,7 @@ use dexitac_tactile::params::{Params, ParamsError};
 use serde::de::{self, Deserialize, Deserializer};
 
 use crate::link::LinkConfig;
-use crate::task_loop::{ControlConfig, DEFAULT_GRASP_CHAMBERS, OPEN_LOOP_CLOSE_MS};
+use crate::task_loop::{ControlConfig, DEFAULT_GRASP_CHAMBERS};
 
 /// Why a rig config could not be used.
 #[derive(Debug, thiserror::Error)]
@@ -173,7 +173,7 @@ impl Default for ControlSection {
         let c = ControlConfig::default();
         ControlSection {
             tactile_feedback: c.tactile_feedback,
-            open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
+            open_loop_close_ms: c.open_loop_close_ms,
             telemetry_interval_ms: c.telemetry_interval_ms,
         }
     }
@@ -229,13 +229,9 @@ impl GripperSection {
             ),
             None => None,
         };
-        let inline = self.name.is_some()
-            || self.finger.is_some()
-            || self.assembly.is_some()
-            || self.fingers.is_some();
         let mut c = match base {
             Some(c) => c,
-            None if !inline && *self == GripperSection::default() => return Ok(None),
+            None if *self == GripperSection::default() => return Ok(None),
             None => GripperConfig {
                 name: self
                     .name
@@ -480,9 +476,10 @@ impl<S> RigConfig<S> {
         Ok(())
     }
 
-    /// The task loop's settings.
-    pub fn control(&self) -> Result<ControlConfig, RigConfigError> {
-        Ok(ControlConfig {
+    /// The task loop's settings (the values were checked when the config
+    /// was parsed).
+    pub fn control(&self) -> ControlConfig {
+        ControlConfig {
             grasp: self.grasp,
             grasp_chambers: self.chambers.grasp_per_finger.concat(),
             tank_targets_pa: (
@@ -494,7 +491,7 @@ impl<S> RigConfig<S> {
             open_loop_close_ms: self.control.open_loop_close_ms,
             task: self.task.clone(),
             ..ControlConfig::default()
-        })
+        }
     }
 
     /// The link's settings.
@@ -540,7 +537,7 @@ mod tests {
     #[test]
     fn an_empty_config_is_the_paper_default() {
         let rig = RigConfig::<NoScenario>::from_toml_str("", "empty").unwrap();
-        let c = rig.control().unwrap();
+        let c = rig.control();
         let d = ControlConfig::default();
         assert_eq!(c.grasp, d.grasp);
         assert_eq!(c.grasp_chambers, d.grasp_chambers);

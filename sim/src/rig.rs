@@ -37,7 +37,6 @@ use crate::render::Renderer;
 use crate::scenario::Scenario;
 use crate::task_report::{task_report, TaskReport};
 use dexitac_gripper::grasp::{Cause, CentreMm, Command};
-use dexitac_rig::config::RigConfigError;
 use dexitac_rig::event::{RuntimeEvent, StopReason};
 use dexitac_rig::link::{Link, LinkConfig, LinkError, LinkStats, Port};
 use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
@@ -121,9 +120,6 @@ pub enum SimError {
         /// Why.
         source: CalibrationError,
     },
-    /// The scenario's rig tables do not make a control config.
-    #[error("scenario: {0}")]
-    Config(#[from] RigConfigError),
 }
 
 /// How the scenario ended.
@@ -365,7 +361,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     let wall_start = Instant::now();
     // The scenario file's rig tables, as `dexitac run --config` reads them;
     // `--no-tactile` (options.tactile_feedback = false) turns feedback off.
-    let base = scenario.rig.control()?;
+    let base = scenario.rig.control();
     let control = ControlConfig {
         tactile_feedback: options.tactile_feedback && base.tactile_feedback,
         task: scenario.task.clone(),

@@ -11,7 +11,6 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 use dexitac_rig::source::Clock;
-use dexitac_tactile::params::Params;
 
 /// Arguments of `dexitac record`.
 #[derive(Debug, clap::Args)]
@@ -37,10 +36,7 @@ pub struct RecordArgs {
 }
 
 fn record_inner(args: &RecordArgs) -> anyhow::Result<()> {
-    let params = match &args.config {
-        Some(path) => Params::load(path).map_err(|e| anyhow!("{e}"))?,
-        None => Params::default(),
-    };
+    let params = crate::shared::sources::load_sensor_config(args.config.as_deref())?;
     let deadline_ms = match args.duration_s {
         Some(s) if s.is_finite() && s > 0.0 => Some((s * 1e3) as u64),
         Some(_) => return Err(anyhow!("--duration-s must be positive")),
