@@ -51,7 +51,9 @@ fn out_of_range_speed_is_refused() {
 fn run_with_a_bad_config_or_port_is_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
     let config = dir.path().join("rig.toml");
-    std::fs::write(&config, "grasp_chambers = [0, 99]\n").unwrap();
+    // A chamber that does not exist (the old flat key `grasp_chambers` is now
+    // `[chambers] grasp_per_finger`: this checks the range, not the schema).
+    std::fs::write(&config, "[chambers]\ngrasp_per_finger = [[0, 99], [4]]\n").unwrap();
     let o = dexitac(&[
         "run",
         "--render",
@@ -61,7 +63,11 @@ fn run_with_a_bad_config_or_port_is_a_clear_error() {
         config.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(2));
-    assert!(stderr(&o).contains("grasp_chambers"), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("chambers.grasp_per_finger") && stderr(&o).contains("chamber 99"),
+        "{}",
+        stderr(&o)
+    );
     std::fs::write(&config, "# defaults\n").unwrap();
     let o = dexitac(&[
         "run",
