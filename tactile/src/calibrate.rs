@@ -9,6 +9,7 @@
 //! that is the skin area up to about the outer marker row. Contact regions
 //! are only searched inside it.
 
+use crate::area::{self, AreaError, SensingArea, WorkToInput};
 use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Detector, MarkerError};
@@ -33,6 +34,9 @@ pub enum CalibrationError {
     /// Marker scale search failed.
     #[error("marker detection on the rest frame failed: {0}")]
     Markers(#[from] MarkerError),
+    /// The sensing area given in the config is invalid.
+    #[error(transparent)]
+    Area(#[from] AreaError),
     /// Too few markers for a calibration.
     #[error("rest frames give {found} stable markers; need at least {MIN_REST_MARKERS}")]
     TooFewMarkers {
@@ -62,14 +66,34 @@ pub struct Calibration {
     pub mask: Vec<bool>,
 }
 
+impl Calibration {
+    /// The sensing area (working px) the detector keeps markers in.
+    pub fn area(&self) -> Option<&SensingArea> {
+        self.detector.area.as_ref()
+    }
+}
+
 /// Calibrates from rest frames (all the same working size).
 pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, CalibrationError> {
+    calibrate_mapped(rest, params, WorkToInput::IDENTITY)
+}
+
+/// [`calibrate`] for working frames that map to the input images by `map`
+/// (crop and rescale, see [`crate::frame::Prepared`]): a sensing area given
+/// in the config is in input pixels.
+pub fn calibrate_mapped(
+    rest: &[GreyFrame],
+    params: &Params,
+    map: WorkToInput,
+) -> Result<Calibration, CalibrationError> {
     let first = rest.first().ok_or(CalibrationError::NoFrames)?;
     let (w, h) = (first.width(), first.height());
     if let Some(f) = rest.iter().find(|f| (f.width(), f.height()) != (w, h)) {
         return Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height()));
     }
-    let detector = markers::auto_detector(first, &params.markers)?;
+    let given = SensingArea::from_spec(&params.area, params.area_mask.as_ref(), w, h, map)?;
+    let mut detector = markers::auto_detector(first, &params.markers)?;
+    detector.area = given.clone();
     let mut sums: Vec<(PointPx, usize)> = markers::detect(first, &detector)
         .positions()
         .into_iter()
@@ -87,19 +111,45 @@ pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, Cal
             }
         }
     }
-    let rest_markers: Vec<PointPx> = sums
+    let stable: Vec<PointPx> = sums
         .into_iter()
         .filter(|s| s.1 == rest.len())
         .map(|(p, n)| PointPx::new(p.x / n as f64, p.y / n as f64))
         .collect();
+    finish(w, h, detector, stable, given, params)
+}
+
+/// From the stable rest markers: the sensing area (given, or found from
+/// the lattice), the markers inside it, the pitch, the search window and
+/// the density reference.
+fn finish(
+    w: usize,
+    h: usize,
+    mut detector: Detector,
+    stable: Vec<PointPx>,
+    given: Option<SensingArea>,
+    params: &Params,
+) -> Result<Calibration, CalibrationError> {
+    if stable.len() < MIN_REST_MARKERS {
+        return Err(CalibrationError::TooFewMarkers {
+            found: stable.len(),
+        });
+    }
+    let area = match given {
+        Some(a) => a,
+        None => area::from_lattice(&stable, median_spacing(&stable), w, h)
+            .unwrap_or_else(|| SensingArea::whole(w, h)),
+    };
+    let rest_markers: Vec<PointPx> = stable.into_iter().filter(|&p| area.contains(p)).collect();
     if rest_markers.len() < MIN_REST_MARKERS {
         return Err(CalibrationError::TooFewMarkers {
             found: rest_markers.len(),
         });
     }
     let pitch_px = median_spacing(&rest_markers);
-    let mut detector = detector;
+    detector.cell_px = ((pitch_px / detector.bin as f64).round() as usize).max(4);
     detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
+    detector.area = Some(area);
     let density = DensitySetup {
         width: w,
         height: h,
@@ -110,7 +160,14 @@ pub fn calibrate(rest: &[GreyFrame], params: &Params) -> Result<Calibration, Cal
         truncate_sigmas: params.density.truncate_sigmas,
     };
     let rest_density = density::estimate(&rest_markers, &density, None);
-    let mask = sensing_mask(&rest_density);
+    let mut mask = sensing_mask(&rest_density);
+    let grid = density.grid();
+    if let Some(area) = &detector.area {
+        for (k, m) in mask.iter_mut().enumerate() {
+            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
+            *m &= area.contains(p);
+        }
+    }
     Ok(Calibration {
         width: w,
         height: h,

@@ -13,6 +13,7 @@
 //! ground truth, and `bench` measures accuracy against run time on them.
 #![warn(missing_docs)]
 
+pub mod area;
 #[cfg(feature = "synth")]
 pub mod bench;
 pub mod calibrate;

@@ -11,12 +11,18 @@
 //! `sqrt(Dxx Dyy - (0.9 Dxy)^2)` (grey levels) where `Dxx < 0` and `Dyy < 0`
 //! (a bright blob), else 0.
 //!
+//! Light: every threshold is relative to the frame's own local light (see
+//! [`Detector`]): a cell grid gives the local background and marker level,
+//! so markers 3x dimmer than at rest, vignetting, a light gradient, blur and
+//! saturated or dimmer-coloured pins are found with the thresholds set on
+//! the rest frame.
+//!
 //! Speed: the determinant is evaluated only at candidates, the 3x3 intensity
-//! maxima of the detection image at least [`Detector::min_level`] bright
-//! (half the dimmest rest markers' level), and only inside the calibrated
-//! search window around the sensing area. Candidates whose strength passes
-//! the threshold are refined on the full-resolution frame by a half-maximum
-//! intensity centroid; centroids closer than 2 px are one marker.
+//! maxima of the detection image that reach the local level, and only
+//! inside the calibrated search window around the sensing area. Candidates
+//! whose strength passes the threshold are refined on the full-resolution
+//! frame by a half-maximum intensity centroid; centroids closer than 2 px
+//! are one marker; centroids outside the sensing area are dropped.
 //!
 //! The scale (lobe, and whether to detect on a 2x2-binned image for speed)
 //! is found from a rest frame by [`auto_detector`]: the lobe whose
@@ -24,6 +30,7 @@
 //! Markers closer than `(3l - 1) / 2` detection pixels to the image border
 //! are not detected.
 
+use crate::area::SensingArea;
 use crate::frame::GreyFrame;
 use crate::params::MarkerParams;
 use crate::PointPx;
@@ -63,6 +70,11 @@ pub struct Marker {
     pub strength: f32,
     /// Grey level at the detection maximum (binned image when binning).
     pub peak: u8,
+    /// Peak level over the local light: 0 at the local background, 1 at
+    /// the local marker level.
+    pub rel_level: f32,
+    /// Blob strength over the local range (see [`Detector`]).
+    pub rel_strength: f32,
 }
 
 /// The markers of one frame.
@@ -90,27 +102,45 @@ impl Markers {
 }
 
 /// A configured detector (from [`auto_detector`] or built by hand).
+///
+/// Its thresholds are relative to the frame's own local light: the
+/// detection image is cut into cells of [`Detector::cell_px`]; each cell's
+/// darkest and brightest grey level, taken over the cell and its eight
+/// neighbours, are the local background `lo` and marker level `hi`. A
+/// candidate must reach `lo + min_level_ratio (hi - lo)`, and its blob
+/// strength divided by `hi - lo` must reach `min_rel_strength`. Dimmer
+/// light, vignetting, a light gradient or blur scale `hi - lo` and the
+/// strength together, so the same markers pass.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Detector {
     /// Box-filter lobe on the detection image (odd, >= 3).
     pub lobe_px: usize,
     /// Detect on a 2x2-binned image (`2`) or at full resolution (`1`).
     pub bin: usize,
-    /// Candidate blobs are intensity maxima of the detection image at least
-    /// this bright (grey levels; 0 = any maximum). Set by [`auto_detector`]
-    /// to half the dimmest rest markers' level: the determinant of Hessian
-    /// then runs only at candidates instead of at every pixel.
-    pub min_level: u8,
-    /// Minimum blob strength, grey levels.
-    pub min_strength: f32,
-    /// Minimum contrast over the local background, grey levels.
+    /// A candidate peak must be at least this fraction of the way from the
+    /// local background to the local marker level (0..1).
+    pub min_level_ratio: f32,
+    /// Minimum blob strength over the local range `hi - lo`.
+    pub min_rel_strength: f32,
+    /// Minimum marker contrast over the local background, grey levels; also
+    /// the smallest local range `hi - lo` that can hold a marker.
     pub min_contrast: f32,
     /// Estimated marker radius, working px (sets the centroid window).
     pub radius_px: f64,
+    /// Side of the light-envelope cells, detection px (about a pitch).
+    pub cell_px: usize,
     /// Search only `[x0, y0, x1, y1)` (working px; `None`: the whole frame).
     /// The calibration sets it to the sensing area plus a margin.
     pub window_px: Option<[usize; 4]>,
+    /// Keep only markers inside this area (`None`: all). The calibration
+    /// sets it (see [`crate::area`]).
+    pub area: Option<SensingArea>,
 }
+
+/// A local range below this fraction of the frame's typical (75th
+/// percentile) cell range holds no marker: it is flat skin, housing or
+/// noise. Vignetting to 0.45 and a 30 % gradient stay well above it.
+const RANGE_FLOOR_FRACTION: f32 = 0.2;
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
@@ -133,31 +163,121 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
     if w <= 2 * margin + 2 || h <= 2 * margin + 2 {
         return Markers::default();
     }
+    let env = Envelope::new(img, w, h, det.cell_px, det.min_contrast);
     let ii = integral(img, w, h);
-    let min_det = det.min_strength * det.min_strength;
     let mut taken = Occupancy::new(frame.width(), frame.height());
     let mut list = Vec::new();
-    for (x, y, peak) in bright_peaks(img, w, h, margin, det.min_level) {
-        let d = determinant_at(&ii, w + 1, x, y, lobe);
-        if d <= min_det {
-            continue;
-        }
-        let guess = PointPx::new(
+    let to_work = |x: usize, y: usize| {
+        PointPx::new(
             (x0 + x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
             (y0 + y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
-        );
-        if let Some(pos) = refine(frame, guess, det.radius_px, det.min_contrast) {
+        )
+    };
+    for (x, y, peak) in bright_peaks(img, w, h, margin, &env, det.min_level_ratio) {
+        let (lo, range) = env.at(x, y);
+        let d = determinant_at(&ii, w + 1, x, y, lobe);
+        let strength = d.sqrt();
+        if strength < det.min_rel_strength * range {
+            continue;
+        }
+        let guess = to_work(x, y);
+        if det.area.as_ref().is_some_and(|a| !a.contains(guess)) {
+            continue;
+        }
+        // A saturated marker's candidate is its plateau's first pixel, off
+        // the centre: one more pass from the first centroid re-centres the
+        // window on the blob.
+        let refined = refine(frame, guess, det.radius_px, det.min_contrast).and_then(|p| {
+            if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
+                refine(frame, p, det.radius_px, det.min_contrast)
+            } else {
+                Some(p)
+            }
+        });
+        if let Some(pos) = refined {
+            if det.area.as_ref().is_some_and(|a| !a.contains(pos)) {
+                continue;
+            }
             if taken.claim(pos, DUPLICATE_PX, &list) {
                 list.push(Marker {
                     pos,
-                    strength: d.sqrt(),
+                    strength,
                     peak,
+                    rel_level: (peak as f32 - lo) / range,
+                    rel_strength: strength / range,
                 });
             }
         }
     }
     Markers { list }
 }
+
+/// The local light envelope: per cell, the darkest and brightest level over
+/// the cell and its 8 neighbours.
+struct Envelope {
+    cell: usize,
+    cols: usize,
+    lo: Vec<f32>,
+    range: Vec<f32>,
+}
+
+impl Envelope {
+    fn new(img: &[u8], w: usize, h: usize, cell_px: usize, min_contrast: f32) -> Self {
+        let cell = cell_px.max(4);
+        let (cols, rows) = (w.div_ceil(cell), h.div_ceil(cell));
+        let (mut lo, mut hi) = (vec![u8::MAX; cols * rows], vec![0u8; cols * rows]);
+        for (y, row) in img.chunks_exact(w).enumerate() {
+            let r = y / cell;
+            for (c, part) in row.chunks(cell).enumerate() {
+                let (a, b) = part
+                    .iter()
+                    .fold((u8::MAX, 0u8), |(a, b), &v| (a.min(v), b.max(v)));
+                let k = r * cols + c;
+                lo[k] = lo[k].min(a);
+                hi[k] = hi[k].max(b);
+            }
+        }
+        let mut slo = vec![0f32; cols * rows];
+        let mut range = vec![0f32; cols * rows];
+        for r in 0..rows {
+            for c in 0..cols {
+                let (mut a, mut b) = (u8::MAX, 0u8);
+                for rr in r.saturating_sub(1)..=(r + 1).min(rows - 1) {
+                    for cc in c.saturating_sub(1)..=(c + 1).min(cols - 1) {
+                        a = a.min(lo[rr * cols + cc]);
+                        b = b.max(hi[rr * cols + cc]);
+                    }
+                }
+                slo[r * cols + c] = a as f32;
+                range[r * cols + c] = b.saturating_sub(a) as f32;
+            }
+        }
+        let typical = percentile(range.clone(), 0.75);
+        let floor = (RANGE_FLOOR_FRACTION * typical).max(min_contrast).max(1.0);
+        // Cells below the floor can hold no marker: an infinite range
+        // fails every relative test.
+        range
+            .iter_mut()
+            .filter(|v| **v < floor)
+            .for_each(|v| *v = f32::INFINITY);
+        Self {
+            cell,
+            cols,
+            lo: slo,
+            range,
+        }
+    }
+
+    /// Local background and range at a detection pixel.
+    fn at(&self, x: usize, y: usize) -> (f32, f32) {
+        let k = (y / self.cell) * self.cols + x / self.cell;
+        (self.lo[k], self.range[k])
+    }
+}
+
+/// A first centroid this far from its candidate (px, either axis) is refined
+/// once more around itself.
+const RECENTRE_PX: f64 = 1.0;
 
 /// Two refined centroids closer than this are one marker, px.
 const DUPLICATE_PX: f64 = 2.0;
@@ -211,32 +331,45 @@ impl Occupancy {
 }
 
 /// Candidate blob centres: 3x3 intensity maxima (a plateau yields its first
-/// pixel in raster order) at least `min_level` bright, `margin` px inside.
+/// pixel in raster order) at least `ratio` of the way from the local
+/// background to the local marker level, `margin` px inside.
 fn bright_peaks(
     img: &[u8],
     w: usize,
     h: usize,
     margin: usize,
-    min_level: u8,
+    env: &Envelope,
+    ratio: f32,
 ) -> Vec<(usize, usize, u8)> {
     const CHUNK: usize = 16;
     let m = margin.max(1);
     if w <= 2 * m || h <= 2 * m {
         return Vec::new();
     }
-    let level = min_level.max(1);
     let n = w - 2 * m;
     let mut flags = vec![0u8; n];
+    // Per-pixel candidate level of the current cell row; 256 = none.
+    let mut level = vec![0u16; w];
     let mut out = Vec::new();
+    let mut level_row = usize::MAX;
     for y in m..h - m {
+        if y / env.cell != level_row {
+            level_row = y / env.cell;
+            for (c, part) in level.chunks_mut(env.cell).enumerate() {
+                let k = level_row * env.cols + c;
+                let (lo, range) = (env.lo[k], env.range[k]);
+                // An infinite range (no marker possible) gives 256: none.
+                let t = (lo + ratio * range).ceil().clamp(1.0, 256.0) as u16;
+                part.iter_mut().for_each(|v| *v = t);
+            }
+        }
         let (up, row, down) = (
             &img[(y - 1) * w..y * w],
             &img[y * w..(y + 1) * w],
             &img[(y + 1) * w..(y + 2) * w],
         );
-        // Branch-free over the row (vectorises to byte max / compares):
-        // strictly above the neighbours before it in raster order, at least
-        // as bright as those after it.
+        // Strictly above the four neighbours met before it in raster order,
+        // at least the four after: one candidate per plateau.
         let before = up[m - 1..]
             .iter()
             .zip(&up[m..])
@@ -249,8 +382,14 @@ fn bright_peaks(
             .zip(&down[m..])
             .zip(&down[m + 1..])
             .map(|(((a, b), c), d)| *a.max(b).max(c).max(d));
-        for (((f, &v), a), b) in flags.iter_mut().zip(&row[m..]).zip(before).zip(after) {
-            *f = u8::from(v > a) & u8::from(v >= b) & u8::from(v >= level);
+        for ((((f, &v), a), b), &t) in flags
+            .iter_mut()
+            .zip(&row[m..])
+            .zip(before)
+            .zip(after)
+            .zip(&level[m..])
+        {
+            *f = u8::from(v > a) & u8::from(v >= b) & u8::from(v as u16 >= t);
         }
         for (c, chunk) in flags.chunks(CHUNK).enumerate() {
             if chunk.iter().fold(0u8, |a, &f| a | f) == 0 {
@@ -325,17 +464,20 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
     } else {
         (1, full_lobe)
     };
+    let radius_px = 0.4 * full_lobe as f64 * std::f64::consts::SQRT_2;
     let mut det = Detector {
         lobe_px,
         bin,
-        min_level: 0,
-        min_strength: 1e-3,
+        min_level_ratio: MIN_LEVEL_RATIO_RANGE.0,
+        min_rel_strength: 1e-3,
         min_contrast: params.min_contrast,
-        radius_px: 0.4 * full_lobe as f64 * std::f64::consts::SQRT_2,
+        radius_px,
+        cell_px: ((CELL_RADII * radius_px) / bin as f64).round().max(4.0) as usize,
         window_px: None,
+        area: None,
     };
     let all = detect(rest, &det);
-    let strengths: Vec<f32> = all.list.iter().map(|m| m.strength).collect();
+    let strengths: Vec<f32> = all.list.iter().map(|m| m.rel_strength).collect();
     let needed = 3;
     if strengths.len() < needed {
         return Err(MarkerError::TooFewMarkers {
@@ -343,16 +485,27 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
             needed,
         });
     }
-    det.min_strength = params.strength_ratio * percentile(strengths, 0.9);
+    det.min_rel_strength = params.strength_ratio * percentile(strengths, 0.9);
     let kept: Vec<f32> = all
         .list
         .iter()
-        .filter(|m| m.strength > det.min_strength)
-        .map(|m| m.peak as f32)
+        .filter(|m| m.rel_strength > det.min_rel_strength)
+        .map(|m| m.rel_level)
         .collect();
-    det.min_level = (0.5 * percentile(kept, 0.05)) as u8;
+    det.min_level_ratio = (LEVEL_FRACTION * percentile(kept, 0.05))
+        .clamp(MIN_LEVEL_RATIO_RANGE.0, MIN_LEVEL_RATIO_RANGE.1);
     Ok(det)
 }
+
+/// [`Detector::min_level_ratio`] is set from a rest frame to this fraction
+/// of the dimmest rest markers' relative level (5th percentile), so that
+/// pins of a second, dimmer colour and markers faded to 40 % stay in.
+const LEVEL_FRACTION: f32 = 0.35;
+/// Bounds of [`Detector::min_level_ratio`] as set from a rest frame.
+const MIN_LEVEL_RATIO_RANGE: (f32, f32) = (0.15, 0.5);
+/// Light-envelope cell of the automatic detector, in marker radii (about a
+/// pitch of a DigiTac skin); the calibration sets it to the pitch.
+const CELL_RADII: f64 = 3.5;
 
 /// Value at quantile `q` (0..=1) of `v` (0 for an empty vector).
 fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
@@ -635,11 +788,13 @@ mod tests {
             let det = Detector {
                 lobe_px: 3,
                 bin: 1,
-                min_level: 0,
-                min_strength: 1.0,
+                min_level_ratio: 0.3,
+                min_rel_strength: 0.05,
                 min_contrast: 6.0,
                 radius_px: 3.0,
+                cell_px: 8,
                 window_px: None,
+                area: None,
             };
             assert!(detect(&frame, &det).is_empty());
             assert!(matches!(

@@ -19,6 +19,8 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
+use crate::area::{AreaSpec, MaskImage};
+
 /// Working frame width (Sec. III-B: "grayscale images of dimension 640x480").
 pub const WORK_WIDTH_PX: u32 = 640;
 /// Working frame height (Sec. III-B).
@@ -97,6 +99,12 @@ pub struct Params {
     pub density: DensityParams,
     /// Contact segmentation and tracking.
     pub contact: ContactParams,
+    /// The sensing area (`[area]`, input px); automatic by default.
+    pub area: AreaSpec,
+    /// The decoded mask image of an `[area] shape = "mask"` config, filled
+    /// by whoever reads the config file (this crate reads no images).
+    #[serde(skip)]
+    pub area_mask: Option<MaskImage>,
 }
 
 /// Frame preparation parameters (stage 1).

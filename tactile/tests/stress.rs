@@ -241,11 +241,13 @@ proptest! {
         let det = markers::Detector {
             lobe_px: 3,
             bin: 1,
-            min_level: 0,
-            min_strength: 1.0,
+            min_level_ratio: 0.3,
+            min_rel_strength: 0.05,
             min_contrast: 6.0,
             radius_px: 3.0,
+            cell_px: 8,
             window_px: None,
+            area: None,
         };
         for m in markers::detect(&p.grey, &det).list {
             prop_assert!(m.pos.is_finite());

@@ -1,0 +1,607 @@
+//! The sensing area: the part of the working frame covered by the skin's
+//! marker lattice. Detections outside it (the bright housing, LEDs, dust,
+//! reflections) are dropped before density and tracking.
+//!
+//! The area is either found from the rest frame ([`from_lattice`]: the
+//! convex hull of the markers that sit in a regular lattice, grown by half a
+//! pitch) or given in the sensor config as a circle, a rounded rectangle, a
+//! polygon or a mask image ([`AreaSpec`], in input-image pixels). Either way
+//! it is stored as row spans of the working frame, so the test of a point
+//! is a lookup of its row and a scan of that row's (usually one) spans.
+
+use serde::Deserialize;
+
+use crate::PointPx;
+
+/// The sensing area as given in a sensor config (`[area]`), in input-image
+/// pixels (before crop and rescale).
+#[derive(Debug, Clone, PartialEq, Deserialize, Default)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum AreaSpec {
+    /// Found from the rest frame's marker lattice (the default).
+    #[default]
+    Auto,
+    /// The whole frame: no detection is dropped.
+    Whole,
+    /// A circle.
+    Circle {
+        /// Centre `[x, y]`, input px.
+        centre_px: [f64; 2],
+        /// Radius, input px.
+        radius_px: f64,
+    },
+    /// A rectangle with rounded corners.
+    RoundedRect {
+        /// `[x, y, width, height]`, input px.
+        rect_px: [f64; 4],
+        /// Corner radius, input px (0: square corners).
+        #[serde(default)]
+        corner_radius_px: f64,
+    },
+    /// A polygon (at least 3 vertices, any winding; even-odd fill).
+    Polygon {
+        /// Vertices `[[x, y], ...]`, input px.
+        points_px: Vec<[f64; 2]>,
+    },
+    /// A mask image, as large as the input frame: non-zero pixels are the
+    /// sensing area. The path is relative to the config file; the caller
+    /// that reads the config decodes it into [`MaskImage`] (this crate reads
+    /// no files).
+    Mask {
+        /// Path of a PNG (grey or colour) mask.
+        path: std::path::PathBuf,
+    },
+}
+
+/// A decoded mask image in input pixels: `true` = sensing area.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MaskImage {
+    /// Width, input px.
+    pub width: usize,
+    /// Height, input px.
+    pub height: usize,
+    /// Row-major, `width * height` values.
+    pub inside: Vec<bool>,
+}
+
+/// Map from working-frame pixels to input-image pixels (see
+/// [`crate::frame::Prepared::to_input`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WorkToInput {
+    /// Input px per working px, x.
+    pub scale_x: f64,
+    /// Input px per working px, y.
+    pub scale_y: f64,
+    /// Crop origin in input px.
+    pub origin_px: PointPx,
+}
+
+impl WorkToInput {
+    /// The identity (working frame = input frame).
+    pub const IDENTITY: Self = Self {
+        scale_x: 1.0,
+        scale_y: 1.0,
+        origin_px: PointPx::new(0.0, 0.0),
+    };
+
+    /// Working point -> input point (pixel centres at integers).
+    pub fn apply(&self, p: PointPx) -> PointPx {
+        PointPx::new(
+            self.origin_px.x + (p.x + 0.5) * self.scale_x - 0.5,
+            self.origin_px.y + (p.y + 0.5) * self.scale_y - 0.5,
+        )
+    }
+}
+
+/// Errors of an area given in the config.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum AreaError {
+    /// A shape with a non-finite or non-positive size, or a polygon with
+    /// fewer than 3 vertices.
+    #[error("sensing area: {0}")]
+    Invalid(&'static str),
+    /// A mask spec reached the pipeline without its decoded image.
+    #[error("sensing area: the mask image {0} was not loaded")]
+    MaskNotLoaded(std::path::PathBuf),
+    /// The mask image's size differs from the input frame's.
+    #[error("sensing area: mask is {mask_w}x{mask_h} but frames are {frame_w}x{frame_h}")]
+    MaskSize {
+        /// Mask width, px.
+        mask_w: usize,
+        /// Mask height, px.
+        mask_h: usize,
+        /// Input frame width, px.
+        frame_w: usize,
+        /// Input frame height, px.
+        frame_h: usize,
+    },
+    /// The area covers no working pixel.
+    #[error("sensing area covers no pixel of the working frame")]
+    Empty,
+}
+
+/// The sensing area on the working frame, as row spans `[x0, x1)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensingArea {
+    width: usize,
+    height: usize,
+    /// Per row, the half-open x ranges inside the area, ascending.
+    rows: Vec<Vec<(u16, u16)>>,
+}
+
+impl SensingArea {
+    /// The whole `width x height` frame.
+    pub fn whole(width: usize, height: usize) -> Self {
+        let w = width.min(u16::MAX as usize) as u16;
+        Self {
+            width,
+            height,
+            rows: vec![vec![(0, w)]; height],
+        }
+    }
+
+    /// The area from a per-pixel predicate on working-pixel centres.
+    pub fn from_fn(width: usize, height: usize, inside: impl Fn(f64, f64) -> bool) -> Self {
+        let rows = (0..height)
+            .map(|y| {
+                let mut spans = Vec::new();
+                let mut start = None;
+                for x in 0..=width {
+                    let inn = x < width && inside(x as f64, y as f64);
+                    match (inn, start) {
+                        (true, None) => start = Some(x),
+                        (false, Some(s)) => {
+                            spans.push((s as u16, x as u16));
+                            start = None;
+                        }
+                        _ => {}
+                    }
+                }
+                spans
+            })
+            .collect();
+        Self {
+            width,
+            height,
+            rows,
+        }
+    }
+
+    /// The area of a config spec on a `width x height` working frame whose
+    /// pixels map to input pixels by `map`. `Auto` is not a shape: it gives
+    /// `Ok(None)` (the caller finds the area from the rest markers).
+    pub fn from_spec(
+        spec: &AreaSpec,
+        mask: Option<&MaskImage>,
+        width: usize,
+        height: usize,
+        map: WorkToInput,
+    ) -> Result<Option<Self>, AreaError> {
+        let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        let area = match spec {
+            AreaSpec::Auto => return Ok(None),
+            AreaSpec::Whole => Self::whole(width, height),
+            AreaSpec::Circle {
+                centre_px,
+                radius_px,
+            } => {
+                if !finite(centre_px) || !radius_px.is_finite() || *radius_px <= 0.0 {
+                    return Err(AreaError::Invalid(
+                        "circle needs a finite centre and radius > 0",
+                    ));
+                }
+                let [cx, cy] = *centre_px;
+                let r2 = radius_px * radius_px;
+                Self::from_fn(width, height, |x, y| {
+                    let p = map.apply(PointPx::new(x, y));
+                    (p.x - cx).powi(2) + (p.y - cy).powi(2) <= r2
+                })
+            }
+            AreaSpec::RoundedRect {
+                rect_px,
+                corner_radius_px,
+            } => {
+                let [rx, ry, rw, rh] = *rect_px;
+                let r = *corner_radius_px;
+                if !finite(rect_px) || rw <= 0.0 || rh <= 0.0 || !r.is_finite() || r < 0.0 {
+                    return Err(AreaError::Invalid(
+                        "rounded_rect needs finite [x, y, w, h] with w, h > 0 and a corner radius >= 0",
+                    ));
+                }
+                let r = r.min(rw / 2.0).min(rh / 2.0);
+                Self::from_fn(width, height, |x, y| {
+                    let p = map.apply(PointPx::new(x, y));
+                    // Distance outside the rectangle shrunk by r, <= r inside.
+                    let dx = ((rx + r) - p.x).max(p.x - (rx + rw - r)).max(0.0);
+                    let dy = ((ry + r) - p.y).max(p.y - (ry + rh - r)).max(0.0);
+                    p.x >= rx
+                        && p.x <= rx + rw
+                        && p.y >= ry
+                        && p.y <= ry + rh
+                        && dx * dx + dy * dy <= r * r
+                })
+            }
+            AreaSpec::Polygon { points_px } => {
+                if points_px.len() < 3 || !points_px.iter().all(|p| finite(p)) {
+                    return Err(AreaError::Invalid(
+                        "polygon needs at least 3 finite vertices",
+                    ));
+                }
+                let poly: Vec<PointPx> =
+                    points_px.iter().map(|p| PointPx::new(p[0], p[1])).collect();
+                Self::from_fn(width, height, |x, y| {
+                    in_polygon(&poly, map.apply(PointPx::new(x, y)))
+                })
+            }
+            AreaSpec::Mask { path } => {
+                let m = mask.ok_or_else(|| AreaError::MaskNotLoaded(path.clone()))?;
+                if m.inside.len() != m.width * m.height {
+                    return Err(AreaError::Invalid("mask buffer does not match its size"));
+                }
+                Self::from_fn(width, height, |x, y| {
+                    let p = map.apply(PointPx::new(x, y));
+                    let (ix, iy) = (p.x.round(), p.y.round());
+                    ix >= 0.0
+                        && iy >= 0.0
+                        && (ix as usize) < m.width
+                        && (iy as usize) < m.height
+                        && m.inside[iy as usize * m.width + ix as usize]
+                })
+            }
+        };
+        if area.pixel_count() == 0 {
+            return Err(AreaError::Empty);
+        }
+        Ok(Some(area))
+    }
+
+    /// Checks a decoded mask against the input frame size.
+    pub fn check_mask(mask: &MaskImage, frame_w: usize, frame_h: usize) -> Result<(), AreaError> {
+        if (mask.width, mask.height) == (frame_w, frame_h) {
+            Ok(())
+        } else {
+            Err(AreaError::MaskSize {
+                mask_w: mask.width,
+                mask_h: mask.height,
+                frame_w,
+                frame_h,
+            })
+        }
+    }
+
+    /// Working frame width, px.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Working frame height, px.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// True when the point (working px, pixel centres at integers) is inside.
+    pub fn contains(&self, p: PointPx) -> bool {
+        if !p.is_finite() {
+            return false;
+        }
+        let (x, y) = (p.x.round(), p.y.round());
+        if x < 0.0 || y < 0.0 || y as usize >= self.height {
+            return false;
+        }
+        let x = x as usize;
+        self.rows[y as usize]
+            .iter()
+            .any(|&(a, b)| (a as usize) <= x && x < b as usize)
+    }
+
+    /// Number of working pixels inside.
+    pub fn pixel_count(&self) -> usize {
+        self.rows
+            .iter()
+            .flatten()
+            .map(|&(a, b)| (b - a) as usize)
+            .sum()
+    }
+
+    /// Bounding box `[x0, y0, x1, y1)` of the area (working px), or `None`
+    /// when it is empty.
+    pub fn bounds(&self) -> Option<[usize; 4]> {
+        let ys: Vec<usize> = (0..self.height)
+            .filter(|&y| !self.rows[y].is_empty())
+            .collect();
+        let (y0, y1) = (*ys.first()?, *ys.last()? + 1);
+        let x0 = self
+            .rows
+            .iter()
+            .filter_map(|r| r.first())
+            .map(|s| s.0)
+            .min()? as usize;
+        let x1 = self
+            .rows
+            .iter()
+            .filter_map(|r| r.last())
+            .map(|s| s.1)
+            .max()? as usize;
+        Some([x0, y0, x1, y1])
+    }
+}
+
+/// Even-odd point-in-polygon test.
+fn in_polygon(poly: &[PointPx], p: PointPx) -> bool {
+    let mut inside = false;
+    let mut j = poly.len() - 1;
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[j]);
+        if (a.y > p.y) != (b.y > p.y) && p.x < (b.x - a.x) * (p.y - a.y) / (b.y - a.y) + a.x {
+            inside = !inside;
+        }
+        j = i;
+    }
+    inside
+}
+
+/// Markers that sit in a regular lattice: a marker is kept when at least
+/// [`LATTICE_MIN_NEIGHBOURS`] others lie within [`LATTICE_REACH`] times its
+/// own nearest-neighbour distance, and that distance is at most
+/// [`LATTICE_MAX_GAP`] times the median one. A skin's markers (the rim's
+/// included: two along the rim and two inwards) pass; LEDs, dust and
+/// reflections on the housing are isolated or irregular and fail. Returns
+/// the indices kept. O(n^2): calibration runs once.
+pub fn lattice_members(points: &[PointPx]) -> Vec<usize> {
+    let n = points.len();
+    if n < LATTICE_MIN_NEIGHBOURS + 1 {
+        return (0..n).collect();
+    }
+    let dists: Vec<Vec<f64>> = points
+        .iter()
+        .map(|p| {
+            let mut d: Vec<f64> = points
+                .iter()
+                .map(|q| (q.x - p.x).hypot(q.y - p.y))
+                .filter(|&d| d > 0.0)
+                .collect();
+            d.sort_by(f64::total_cmp);
+            d.truncate(LATTICE_MIN_NEIGHBOURS + 4);
+            d
+        })
+        .collect();
+    let mut nn: Vec<f64> = dists.iter().filter_map(|d| d.first().copied()).collect();
+    if nn.is_empty() {
+        return Vec::new();
+    }
+    let k = nn.len() / 2;
+    let median = *nn.select_nth_unstable_by(k, f64::total_cmp).1;
+    dists
+        .iter()
+        .enumerate()
+        .filter(|(_, d)| {
+            let Some(&d1) = d.first() else { return false };
+            d1 <= LATTICE_MAX_GAP * median
+                && d.iter().filter(|&&x| x <= LATTICE_REACH * d1).count() >= LATTICE_MIN_NEIGHBOURS
+        })
+        .map(|(i, _)| i)
+        .collect()
+}
+
+/// Neighbours a lattice marker needs within [`LATTICE_REACH`] x its
+/// nearest-neighbour distance (a hex lattice's rim marker has 4).
+pub const LATTICE_MIN_NEIGHBOURS: usize = 3;
+/// Reach of the neighbour count, in units of the marker's own
+/// nearest-neighbour distance (a hex lattice's second ring is at 1.73).
+pub const LATTICE_REACH: f64 = 1.5;
+/// A marker whose nearest neighbour is farther than this many median
+/// spacings is isolated.
+pub const LATTICE_MAX_GAP: f64 = 2.0;
+/// The automatic area is the lattice's convex hull grown by this many
+/// pitches (the outer markers' own extent plus a margin for their motion).
+pub const HULL_GROWTH_PITCH: f64 = 0.6;
+
+/// The sensing area from the rest markers: the convex hull of the lattice
+/// markers ([`lattice_members`]), grown outwards by [`HULL_GROWTH_PITCH`]
+/// times `pitch_px`. `None` with fewer than 3 lattice markers.
+pub fn from_lattice(
+    points: &[PointPx],
+    pitch_px: f64,
+    width: usize,
+    height: usize,
+) -> Option<SensingArea> {
+    let kept: Vec<PointPx> = lattice_members(points)
+        .into_iter()
+        .map(|i| points[i])
+        .collect();
+    let hull = convex_hull(&kept);
+    if hull.len() < 3 {
+        return None;
+    }
+    let (sx, sy) = hull.iter().fold((0.0, 0.0), |(a, b), p| (a + p.x, b + p.y));
+    let c = PointPx::new(sx / hull.len() as f64, sy / hull.len() as f64);
+    let grow = HULL_GROWTH_PITCH * pitch_px;
+    let grown: Vec<PointPx> = hull
+        .iter()
+        .map(|p| {
+            let (dx, dy) = (p.x - c.x, p.y - c.y);
+            let r = dx.hypot(dy).max(1e-9);
+            PointPx::new(p.x + grow * dx / r, p.y + grow * dy / r)
+        })
+        .collect();
+    let area = SensingArea::from_fn(width, height, |x, y| in_polygon(&grown, PointPx::new(x, y)));
+    (area.pixel_count() > 0).then_some(area)
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise in image
+/// coordinates, without collinear points.
+pub fn convex_hull(points: &[PointPx]) -> Vec<PointPx> {
+    let mut p: Vec<PointPx> = points.iter().copied().filter(|p| p.is_finite()).collect();
+    p.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross =
+        |o: PointPx, a: PointPx, b: PointPx| (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+    let mut hull: Vec<PointPx> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &PointPx>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2
+                && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hex(cx: f64, cy: f64, radius: f64, pitch: f64) -> Vec<PointPx> {
+        let mut v = Vec::new();
+        let rows = (radius / (pitch * 0.866)) as i64 + 1;
+        for j in -rows..=rows {
+            let y = cy + j as f64 * pitch * 0.866;
+            let off = if j % 2 == 0 { 0.0 } else { pitch / 2.0 };
+            for i in -rows - 1..=rows + 1 {
+                let x = cx + i as f64 * pitch + off;
+                if (x - cx).hypot(y - cy) <= radius {
+                    v.push(PointPx::new(x, y));
+                }
+            }
+        }
+        v
+    }
+
+    #[test]
+    fn housing_blobs_are_not_lattice_and_fall_outside_the_area() {
+        let mut pts = hex(320.0, 240.0, 180.0, 15.0);
+        let n = pts.len();
+        // LEDs just outside the disc, and dust specks on the housing.
+        let outside = [
+            PointPx::new(320.0, 240.0 - 215.0),
+            PointPx::new(320.0 + 212.0, 240.0),
+            PointPx::new(40.0, 30.0),
+            PointPx::new(600.0, 450.0),
+            PointPx::new(610.0, 455.0),
+        ];
+        pts.extend(outside);
+        let kept = lattice_members(&pts);
+        assert_eq!(kept.len(), n, "every lattice marker and no housing blob");
+        assert!(kept.iter().all(|&i| i < n));
+        let area = from_lattice(&pts, 15.0, 640, 480).unwrap();
+        assert!(pts[..n].iter().all(|&p| area.contains(p)));
+        assert!(outside.iter().all(|&p| !area.contains(p)));
+    }
+
+    #[test]
+    fn config_shapes_map_from_input_pixels() {
+        // Working 320x240 from a 640x480 input: 2 input px per working px.
+        let map = WorkToInput {
+            scale_x: 2.0,
+            scale_y: 2.0,
+            origin_px: PointPx::new(0.0, 0.0),
+        };
+        let circle = AreaSpec::Circle {
+            centre_px: [320.0, 240.0],
+            radius_px: 100.0,
+        };
+        let a = SensingArea::from_spec(&circle, None, 320, 240, map)
+            .unwrap()
+            .unwrap();
+        assert!(a.contains(PointPx::new(160.0, 120.0)));
+        assert!(a.contains(PointPx::new(160.0 + 48.0, 120.0)));
+        assert!(!a.contains(PointPx::new(160.0 + 52.0, 120.0)));
+        let area_px = a.pixel_count() as f64;
+        let want = std::f64::consts::PI * 50.0 * 50.0;
+        assert!((area_px - want).abs() < 0.02 * want, "{area_px} vs {want}");
+
+        let rr = AreaSpec::RoundedRect {
+            rect_px: [100.0, 100.0, 200.0, 100.0],
+            corner_radius_px: 40.0,
+        };
+        let a = SensingArea::from_spec(&rr, None, 640, 480, WorkToInput::IDENTITY)
+            .unwrap()
+            .unwrap();
+        assert!(a.contains(PointPx::new(200.0, 150.0)));
+        assert!(!a.contains(PointPx::new(101.0, 101.0)), "the corner is cut");
+        assert!(a.contains(PointPx::new(101.0, 150.0)));
+        assert_eq!(a.bounds(), Some([100, 100, 301, 201]));
+
+        let tri = AreaSpec::Polygon {
+            points_px: vec![[0.0, 0.0], [100.0, 0.0], [0.0, 100.0]],
+        };
+        let a = SensingArea::from_spec(&tri, None, 640, 480, WorkToInput::IDENTITY)
+            .unwrap()
+            .unwrap();
+        assert!(a.contains(PointPx::new(10.0, 10.0)));
+        assert!(!a.contains(PointPx::new(60.0, 60.0)));
+
+        let mut inside = vec![false; 64 * 48];
+        inside[10 * 64 + 20] = true;
+        let mask = MaskImage {
+            width: 64,
+            height: 48,
+            inside,
+        };
+        let spec = AreaSpec::Mask {
+            path: "m.png".into(),
+        };
+        let a = SensingArea::from_spec(&spec, Some(&mask), 64, 48, WorkToInput::IDENTITY)
+            .unwrap()
+            .unwrap();
+        assert_eq!(a.pixel_count(), 1);
+        assert!(a.contains(PointPx::new(20.2, 9.8)));
+    }
+
+    #[test]
+    fn bad_shapes_are_typed_errors() {
+        let id = WorkToInput::IDENTITY;
+        let bad = [
+            AreaSpec::Circle {
+                centre_px: [f64::NAN, 0.0],
+                radius_px: 3.0,
+            },
+            AreaSpec::Circle {
+                centre_px: [0.0, 0.0],
+                radius_px: -3.0,
+            },
+            AreaSpec::Polygon {
+                points_px: vec![[0.0, 0.0], [1.0, 1.0]],
+            },
+            AreaSpec::RoundedRect {
+                rect_px: [0.0, 0.0, 0.0, 10.0],
+                corner_radius_px: 0.0,
+            },
+        ];
+        for spec in &bad {
+            assert!(matches!(
+                SensingArea::from_spec(spec, None, 64, 48, id),
+                Err(AreaError::Invalid(_))
+            ));
+        }
+        let off = AreaSpec::Circle {
+            centre_px: [-500.0, -500.0],
+            radius_px: 3.0,
+        };
+        assert_eq!(
+            SensingArea::from_spec(&off, None, 64, 48, id),
+            Err(AreaError::Empty)
+        );
+        let mask = AreaSpec::Mask {
+            path: "m.png".into(),
+        };
+        assert!(matches!(
+            SensingArea::from_spec(&mask, None, 64, 48, id),
+            Err(AreaError::MaskNotLoaded(_))
+        ));
+        assert!(!SensingArea::whole(4, 4).contains(PointPx::new(f64::NAN, 1.0)));
+    }
+}
