@@ -390,8 +390,10 @@ pub const LATTICE_MIN_NEIGHBOURS: usize = 3;
 /// nearest-neighbour distance (a hex lattice's second ring is at 1.73).
 pub const LATTICE_REACH: f64 = 1.5;
 /// A marker whose nearest neighbour is farther than this many median
-/// spacings is isolated.
-pub const LATTICE_MAX_GAP: f64 = 2.0;
+/// spacings is isolated. The LEDs and specks around a real TacTip's pin
+/// disc sit about 1.95 median spacings from the outer ring; a dome's
+/// central markers (the widest spaced) are within about 1.3.
+pub const LATTICE_MAX_GAP: f64 = 1.5;
 /// The automatic area is the lattice's convex hull grown by this many
 /// pitches (the outer markers' own extent plus a margin for their motion).
 pub const HULL_GROWTH_PITCH: f64 = 0.6;

@@ -119,6 +119,91 @@ pub fn calibrate_mapped(
     finish(w, h, detector, stable, given, params)
 }
 
+/// Most frames [`calibrate_from_frames`] looks at (evenly spaced).
+pub const REST_FROM_FRAMES_MAX: usize = 63;
+
+/// A rest calibration for a data set without a rest frame, estimated from
+/// the frames themselves: the pixel-wise median of up to
+/// [`REST_FROM_FRAMES_MAX`] evenly spaced frames gives the detector, the
+/// sensing area and the lattice; each marker's rest position is then the
+/// median of its positions over the frames in which it is found near its
+/// place (within half a pitch).
+///
+/// What it can see: any part of the skin that is untouched in more than
+/// half of the frames is at its true rest. What it cannot: a contact that
+/// covers the same place in most frames (taps always at the centre, a
+/// held object) becomes part of the "rest"; there, density and
+/// displacement are relative to the typical pressed state, so contacts are
+/// found where a frame differs from the typical one, and a contact present
+/// in every frame is invisible.
+pub fn calibrate_from_frames(
+    frames: &[GreyFrame],
+    params: &Params,
+    map: WorkToInput,
+) -> Result<Calibration, CalibrationError> {
+    let first = frames.first().ok_or(CalibrationError::NoFrames)?;
+    let (w, h) = (first.width(), first.height());
+    if let Some(f) = frames.iter().find(|f| (f.width(), f.height()) != (w, h)) {
+        return Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height()));
+    }
+    let n = frames.len().min(REST_FROM_FRAMES_MAX);
+    let picked: Vec<&GreyFrame> = (0..n).map(|k| &frames[k * frames.len() / n]).collect();
+    let median = median_image(&picked);
+    let given = SensingArea::from_spec(&params.area, params.area_mask.as_ref(), w, h, map)?;
+    let mut detector = markers::auto_detector(&median, &params.markers)?;
+    detector.area = given.clone();
+    let anchors = markers::detect(&median, &detector).positions();
+    if anchors.len() < MIN_REST_MARKERS {
+        return Err(CalibrationError::TooFewMarkers {
+            found: anchors.len(),
+        });
+    }
+    let reach = 0.5 * median_spacing(&anchors);
+    let mut seen: Vec<Vec<PointPx>> = vec![Vec::new(); anchors.len()];
+    for frame in &picked {
+        let found = markers::detect(frame, &detector).positions();
+        let index = PointIndex::new(&found, w, h, reach);
+        for (s, a) in seen.iter_mut().zip(&anchors) {
+            if let Some((k, _)) = index.nearest(&found, *a, reach) {
+                s.push(found[k]);
+            }
+        }
+    }
+    let stable: Vec<PointPx> = anchors
+        .iter()
+        .zip(seen)
+        .map(|(a, s)| {
+            if 2 * s.len() < picked.len() {
+                return *a;
+            }
+            let mut xs: Vec<f64> = s.iter().map(|p| p.x).collect();
+            let mut ys: Vec<f64> = s.iter().map(|p| p.y).collect();
+            let k = xs.len() / 2;
+            let x = *xs.select_nth_unstable_by(k, f64::total_cmp).1;
+            let y = *ys.select_nth_unstable_by(k, f64::total_cmp).1;
+            PointPx::new(x, y)
+        })
+        .collect();
+    finish(w, h, detector, stable, given, params)
+}
+
+/// Pixel-wise median of same-size frames (the lower median for an even
+/// count).
+fn median_image(frames: &[&GreyFrame]) -> GreyFrame {
+    let (w, h) = (frames[0].width(), frames[0].height());
+    let mut column = vec![0u8; frames.len()];
+    let k = (frames.len() - 1) / 2;
+    let data = (0..w * h)
+        .map(|i| {
+            for (c, f) in column.iter_mut().zip(frames) {
+                *c = f.data()[i];
+            }
+            *column.select_nth_unstable(k).1
+        })
+        .collect();
+    GreyFrame::new(w, h, data).expect("the size of a valid frame")
+}
+
 /// From the stable rest markers: the sensing area (given, or found from
 /// the lattice), the markers inside it, the pitch, the search window and
 /// the density reference.

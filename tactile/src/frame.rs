@@ -9,6 +9,7 @@
 //! The sensing-area mask comes from the rest calibration
 //! ([`crate::calibrate`]).
 
+use crate::area::WorkToInput;
 use crate::params::FrameParams;
 use crate::PointPx;
 
@@ -145,12 +146,18 @@ pub struct Prepared {
 }
 
 impl Prepared {
+    /// The map from working to input pixels.
+    pub fn map(&self) -> WorkToInput {
+        WorkToInput {
+            scale_x: self.scale_x,
+            scale_y: self.scale_y,
+            origin_px: self.origin_px,
+        }
+    }
+
     /// Working-frame point -> input-image point (pixel centres at integers).
     pub fn to_input(&self, p: PointPx) -> PointPx {
-        PointPx::new(
-            self.origin_px.x + (p.x + 0.5) * self.scale_x - 0.5,
-            self.origin_px.y + (p.y + 0.5) * self.scale_y - 0.5,
-        )
+        self.map().apply(p)
     }
 }
 
@@ -171,10 +178,7 @@ pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, Fra
             (x, y, w, h)
         }
     };
-    let (ow, oh) = (
-        params.work_width_px as usize,
-        params.work_height_px as usize,
-    );
+    let (ow, oh) = working_size(cw, ch, params);
     check_size(ow, oh)?;
     let out = resize(&grey, [cx, cy, cw, ch], ow, oh);
     Ok(Prepared {
@@ -183,6 +187,25 @@ pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, Fra
         scale_y: ch as f64 / oh as f64,
         origin_px: PointPx::new(cx as f64, cy as f64),
     })
+}
+
+/// The working size for a `cw x ch` input region: the configured size, or
+/// with `keep_aspect` the largest size of the region's aspect ratio that
+/// fits in it (so a square crop of a 640x480 frame becomes 480x480, not a
+/// stretched 640x480).
+pub fn working_size(cw: usize, ch: usize, params: &FrameParams) -> (usize, usize) {
+    let (ow, oh) = (
+        params.work_width_px as usize,
+        params.work_height_px as usize,
+    );
+    if !params.keep_aspect || cw == 0 || ch == 0 || cw * oh == ch * ow {
+        return (ow, oh);
+    }
+    let s = (ow as f64 / cw as f64).min(oh as f64 / ch as f64);
+    (
+        ((cw as f64 * s).round() as usize).clamp(1, ow),
+        ((ch as f64 * s).round() as usize).clamp(1, oh),
+    )
 }
 
 /// Converts any supported raw frame to grey (no resize).

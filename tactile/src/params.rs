@@ -120,6 +120,10 @@ pub struct FrameParams {
     pub crop_px: Option<[u32; 4]>,
     /// Sensor scale, mm per working pixel.
     pub mm_per_px: f64,
+    /// Keep the input's (or the crop's) aspect ratio: the working frame is
+    /// the largest of that ratio inside `work_width_px x work_height_px`.
+    /// `false` stretches to exactly that size.
+    pub keep_aspect: bool,
 }
 
 impl Default for FrameParams {
@@ -129,6 +133,7 @@ impl Default for FrameParams {
             work_height_px: WORK_HEIGHT_PX,
             crop_px: None,
             mm_per_px: MM_PER_PX,
+            keep_aspect: true,
         }
     }
 }

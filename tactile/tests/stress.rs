@@ -165,10 +165,21 @@ fn tiny_and_huge_inputs_are_rescaled_or_rejected() {
             data: &data,
         };
         let p = frame::prepare(&raw, &fp).unwrap();
-        assert_eq!((p.grey.width(), p.grey.height()), (640, 480));
+        let (gw, gh) = (p.grey.width(), p.grey.height());
+        // The largest frame of the input's aspect inside 640x480.
+        assert!(gw == 640 || gh == 480, "{w}x{h} -> {gw}x{gh}");
+        assert!(gw <= 640 && gh <= 480);
+        let aspect = |a: usize, b: usize| a as f64 / b as f64;
+        assert!((aspect(gw, gh) - aspect(w, h)).abs() <= aspect(w, h) / gh.min(gw) as f64);
         assert!(p.grey.data().iter().all(|&v| v == 77));
-        let c = p.to_input(PointPx::new(639.0, 479.0));
+        let c = p.to_input(PointPx::new(gw as f64 - 1.0, gh as f64 - 1.0));
         assert!(c.x <= w as f64 && c.y <= h as f64);
+        let stretched = FrameParams {
+            keep_aspect: false,
+            ..FrameParams::default()
+        };
+        let p = frame::prepare(&raw, &stretched).unwrap();
+        assert_eq!((p.grey.width(), p.grey.height()), (640, 480));
     }
     let raw = RawFrame {
         width: 20_000,

@@ -5,6 +5,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use dexitac_tactile::area::WorkToInput;
 use dexitac_tactile::calibrate;
 use dexitac_tactile::displacement::ShiftTracker;
 use dexitac_tactile::frame::{self, Prepared, RawFrame};
@@ -20,8 +21,14 @@ use crate::shared::sources::load_sensor_config;
 #[derive(Debug, clap::Args)]
 pub struct AnalyzeArgs {
     /// Rest (no-contact) frame; repeat for several.
-    #[arg(long, required = true, value_name = "REST.png")]
+    #[arg(long, value_name = "REST.png", required_unless_present = "rest_from_frames")]
     rest: Vec<PathBuf>,
+    /// No rest frame: estimate the rest from the frames themselves (the
+    /// pixel-wise median of up to 63 evenly spaced frames, then each
+    /// marker's median position). A contact at the same place in most
+    /// frames becomes part of that rest and is not seen.
+    #[arg(long, conflicts_with = "rest")]
+    rest_from_frames: bool,
     /// Sensor config (TOML); defaults to the paper's parameters.
     #[arg(long, value_name = "SENSOR.toml")]
     config: Option<PathBuf>,
@@ -73,9 +80,17 @@ impl AnalyzeArgs {
 
 fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     let params = load_sensor_config(args.config.as_deref())?;
+    let (files, mut failed) = expand(&args.frames);
+    let rest_paths: Vec<&PathBuf> = if args.rest_from_frames {
+        let n = files.len().min(calibrate::REST_FROM_FRAMES_MAX);
+        (0..n).map(|k| &files[k * files.len() / n]).collect()
+    } else {
+        args.rest.iter().collect()
+    };
     let mut rest_prepared = Vec::new();
     let mut rest_size = None;
-    for path in &args.rest {
+    let mut map = WorkToInput::IDENTITY;
+    for path in rest_paths {
         let d = decode(path).map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
         if let Some((w, h)) = rest_size {
             if (w, h) != (d.width, d.height) {
@@ -90,13 +105,18 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
         rest_size = Some((d.width, d.height));
         let p = frame::prepare(&d.raw(), &params.frame)
             .map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
+        map = p.map();
         rest_prepared.push(p.grey);
     }
     let (rest_w, rest_h) = rest_size.ok_or_else(|| anyhow!("no rest frame"))?;
-    let cal = calibrate::calibrate(&rest_prepared, &params).map_err(|e| anyhow!("{e}"))?;
+    let cal = if args.rest_from_frames {
+        calibrate::calibrate_from_frames(&rest_prepared, &params, map)
+    } else {
+        calibrate::calibrate_mapped(&rest_prepared, &params, map)
+    }
+    .map_err(|e| anyhow!("{e}"))?;
     let pipeline = Pipeline::new(cal, params.clone());
 
-    let (files, mut failed) = expand(&args.frames);
     if let Some(dir) = &args.markers_out {
         std::fs::create_dir_all(dir)
             .map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))?;

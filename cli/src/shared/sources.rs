@@ -31,6 +31,7 @@ use dexitac_rig::recording::{RecordedFrame, Recording, ReplaySource};
 use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
 use dexitac_rig::sources::{self, FolderSource, Pace};
 use dexitac_rig::task_loop::Sensor;
+use dexitac_tactile::area::{AreaSpec, MaskImage};
 use dexitac_sim::plant::ContactState;
 use dexitac_sim::render::Renderer;
 use dexitac_tactile::calibrate;
@@ -378,11 +379,25 @@ fn camera_sources(
 
 /// The sensor config at `path` (`--config SENSOR.toml`), or the paper's
 /// parameters without one.
+/// A mask image given as the sensing area (`[area] shape = "mask"`) is
+/// read here, relative to the config file.
 pub fn load_sensor_config(path: Option<&Path>) -> anyhow::Result<Params> {
-    match path {
-        Some(path) => Ok(Params::load(path)?),
-        None => Ok(Params::default()),
+    let Some(path) = path else {
+        return Ok(Params::default());
+    };
+    let mut params = Params::load(path)?;
+    if let AreaSpec::Mask { path: mask } = &params.area {
+        let mask = path.parent().unwrap_or(Path::new(".")).join(mask);
+        let img = image::open(&mask)
+            .map_err(|e| anyhow::anyhow!("sensing-area mask {}: {e}", mask.display()))?
+            .to_luma8();
+        params.area_mask = Some(MaskImage {
+            width: img.width() as usize,
+            height: img.height() as usize,
+            inside: img.into_raw().into_iter().map(|v| v > 0).collect(),
+        });
     }
+    Ok(params)
 }
 
 #[cfg(test)]
