@@ -189,6 +189,26 @@ pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, Fra
     })
 }
 
+/// The map from working to input pixels for `width x height` input frames
+/// (crop, then rescale to [`working_size`]); the identity when the crop
+/// does not fit (then [`prepare`] refuses the frames).
+pub fn map_for(width: usize, height: usize, params: &FrameParams) -> WorkToInput {
+    let [cx, cy, cw, ch] = params
+        .crop_px
+        .map(|c| c.map(|v| v as usize))
+        .filter(|&[x, y, w, h]| w > 0 && h > 0 && x + w <= width && y + h <= height)
+        .unwrap_or([0, 0, width, height]);
+    let (ow, oh) = working_size(cw, ch, params);
+    if ow == 0 || oh == 0 {
+        return WorkToInput::IDENTITY;
+    }
+    WorkToInput {
+        scale_x: cw as f64 / ow as f64,
+        scale_y: ch as f64 / oh as f64,
+        origin_px: PointPx::new(cx as f64, cy as f64),
+    }
+}
+
 /// The working size for a `cw x ch` input region: the configured size, or
 /// with `keep_aspect` the largest size of the region's aspect ratio that
 /// fits in it (so a square crop of a 640x480 frame becomes 480x480, not a

@@ -31,11 +31,11 @@ use dexitac_rig::recording::{RecordedFrame, Recording, ReplaySource};
 use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
 use dexitac_rig::sources::{self, FolderSource, Pace};
 use dexitac_rig::task_loop::Sensor;
-use dexitac_tactile::area::{AreaSpec, MaskImage};
+use dexitac_tactile::area::{AreaSpec, MaskImage, WorkToInput};
 use dexitac_sim::plant::ContactState;
 use dexitac_sim::render::Renderer;
 use dexitac_tactile::calibrate;
-use dexitac_tactile::frame::GreyFrame;
+use dexitac_tactile::frame::{self, GreyFrame};
 use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::synth::SensorSpec;
@@ -88,6 +88,9 @@ pub struct SourceSetup {
     pub source: Box<dyn FrameSource>,
     /// Its rest (no-contact) frames.
     pub rest: Vec<GreyFrame>,
+    /// Working -> input pixels (a sensing area in the config is in input
+    /// pixels).
+    pub map: WorkToInput,
     /// For messages: the directory, camera or simulated sensor.
     pub label: String,
 }
@@ -189,9 +192,13 @@ pub fn open(
             let rest = sources::load_frame(&files[0], &params.frame).map_err(|e| anyhow!("{e}"))?;
             let source = FolderSource::new(files[1..].to_vec(), pace, &params.frame)
                 .map_err(|e| anyhow!("{e}"))?;
+            let map = image::image_dimensions(&files[0])
+                .map(|(w, h)| frame::map_for(w as usize, h as usize, &params.frame))
+                .unwrap_or(WorkToInput::IDENTITY);
             Ok(SourceSetup {
                 source: Box::new(source),
                 rest: vec![rest],
+                map,
                 label: dir.display().to_string(),
             })
         })
@@ -208,7 +215,7 @@ pub fn calibrated(
     let mut rests = Vec::new();
     for (finger, s) in setups.into_iter().enumerate() {
         let params = params_for(params, finger);
-        let cal = calibrate::calibrate(&s.rest, params)
+        let cal = calibrate::calibrate_mapped(&s.rest, params, s.map)
             .map_err(|e| anyhow!("{}: rest frame(s): {e}", s.label))?;
         sensors.push(Sensor {
             source: s.source,
@@ -278,6 +285,7 @@ fn steady_source(finger: usize, params: &Params, period_ms: u64) -> SourceSetup 
     SourceSetup {
         source: Box::new(source),
         rest,
+        map: WorkToInput::IDENTITY,
         label: format!("simulated sensor {finger}"),
     }
 }
@@ -302,6 +310,7 @@ fn recording_sources(path: &Path, paced: bool) -> anyhow::Result<Vec<SourceSetup
         out.push(SourceSetup {
             source: Box::new(ReplaySource::new(&rec, sensor, paced)),
             rest,
+            map: WorkToInput::IDENTITY,
             label: format!("{} sensor {sensor}", path.display()),
         });
     }
@@ -368,7 +377,9 @@ fn camera_sources(
                 None => return Err(anyhow!("stopped before the rest frames were captured")),
             }
         }
+        let mode = cam.mode();
         out.push(SourceSetup {
+            map: frame::map_for(mode.width_px as usize, mode.height_px as usize, &params.frame),
             source: Box::new(cam),
             rest,
             label: format!("camera {id} (nothing may touch the fingertip at start)"),
