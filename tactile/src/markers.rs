@@ -212,6 +212,95 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
     Markers { list }
 }
 
+/// Markers found by following known markers instead of searching the
+/// frame: each of `near` (usually the rest markers) is refined by the
+/// half-maximum centroid in a small window around it, re-centred up to
+/// [`FOLLOW_PASSES`] times. `None` (search the whole frame with [`detect`]
+/// instead) when more than [`FOLLOW_MAX_LOST`] of them are lost: moved more
+/// than `reach_px`, faded below [`FOLLOW_MIN_CONTRAST`] of the frame's
+/// median marker contrast (or the detector's absolute floor), or merged
+/// with another. A frame without contact costs one window per marker
+/// instead of a pass over every pixel.
+pub fn follow(
+    frame: &GreyFrame,
+    det: &Detector,
+    near: &[PointPx],
+    reach_px: f64,
+) -> Option<Markers> {
+    let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
+    let mut lost = 0usize;
+    let mut found: Vec<(PointPx, f32)> = Vec::with_capacity(near.len());
+    for &p in near {
+        let mut at = p;
+        let mut hit = None;
+        for _ in 0..FOLLOW_PASSES {
+            match refine_with_contrast(frame, at, det.radius_px, det.min_contrast) {
+                Some((c, contrast)) => {
+                    let step = (c.x - at.x).hypot(c.y - at.y);
+                    at = c;
+                    hit = Some(contrast);
+                    if step < FOLLOW_SETTLED_PX {
+                        break;
+                    }
+                }
+                None => {
+                    hit = None;
+                    break;
+                }
+            }
+        }
+        let kept = hit.filter(|_| {
+            (at.x - p.x).hypot(at.y - p.y) <= reach_px
+                && det.area.as_ref().is_none_or(|a| a.contains(at))
+        });
+        match kept {
+            Some(contrast) => found.push((at, contrast)),
+            None => {
+                lost += 1;
+                if lost > max_lost {
+                    return None;
+                }
+            }
+        }
+    }
+    let median = percentile(found.iter().map(|f| f.1).collect(), 0.5);
+    let before = found.len();
+    found.retain(|f| f.1 >= FOLLOW_MIN_CONTRAST * median);
+    lost += before - found.len();
+    if lost > max_lost {
+        return None;
+    }
+    let mut taken = Occupancy::new(frame.width(), frame.height());
+    let mut list: Vec<Marker> = Vec::with_capacity(found.len());
+    for (pos, contrast) in found {
+        if !taken.claim(pos, DUPLICATE_PX, &list) {
+            // Two markers ran into one blob: a contact squeezes them; the
+            // full search sorts that out.
+            return None;
+        }
+        list.push(Marker {
+            pos,
+            strength: contrast,
+            peak: 0,
+            rel_level: 1.0,
+            rel_strength: contrast / median.max(1.0),
+        });
+    }
+    Some(Markers { list })
+}
+
+/// Most refinement passes per followed marker.
+const FOLLOW_PASSES: usize = 3;
+/// A followed marker whose centroid moved less than this in a pass has
+/// settled, px.
+const FOLLOW_SETTLED_PX: f64 = 0.25;
+/// Fraction of followed markers that may be lost before the frame is
+/// searched in full.
+pub const FOLLOW_MAX_LOST: f64 = 0.01;
+/// A followed marker below this fraction of the frame's median marker
+/// contrast is lost (faded, covered).
+pub const FOLLOW_MIN_CONTRAST: f32 = 0.3;
+
 /// The local light envelope: per cell, the darkest and brightest level over
 /// the cell and its 8 neighbours.
 struct Envelope {
@@ -226,15 +315,21 @@ impl Envelope {
         let cell = cell_px.max(4);
         let (cols, rows) = (w.div_ceil(cell), h.div_ceil(cell));
         let (mut lo, mut hi) = (vec![u8::MAX; cols * rows], vec![0u8; cols * rows]);
-        for (y, row) in img.chunks_exact(w).enumerate() {
-            let r = y / cell;
-            for (c, part) in row.chunks(cell).enumerate() {
-                let (a, b) = part
-                    .iter()
-                    .fold((u8::MAX, 0u8), |(a, b), &v| (a.min(v), b.max(v)));
-                let k = r * cols + c;
-                lo[k] = lo[k].min(a);
-                hi[k] = hi[k].max(b);
+        // Column-wise min / max over a cell row's image rows (vectorises),
+        // then per cell over those.
+        let (mut col_lo, mut col_hi) = (vec![u8::MAX; w], vec![0u8; w]);
+        for (r, band) in img.chunks(cell * w).enumerate() {
+            col_lo.fill(u8::MAX);
+            col_hi.fill(0);
+            for row in band.chunks_exact(w) {
+                for ((a, b), &v) in col_lo.iter_mut().zip(col_hi.iter_mut()).zip(row) {
+                    *a = (*a).min(v);
+                    *b = (*b).max(v);
+                }
+            }
+            for (c, (pl, ph)) in col_lo.chunks(cell).zip(col_hi.chunks(cell)).enumerate() {
+                lo[r * cols + c] = pl.iter().copied().min().unwrap_or(u8::MAX);
+                hi[r * cols + c] = ph.iter().copied().max().unwrap_or(0);
             }
         }
         let mut slo = vec![0f32; cols * rows];
@@ -277,7 +372,7 @@ impl Envelope {
 
 /// A first centroid this far from its candidate (px, either axis) is refined
 /// once more around itself.
-const RECENTRE_PX: f64 = 1.0;
+const RECENTRE_PX: f64 = 1.5;
 
 /// Two refined centroids closer than this are one marker, px.
 const DUPLICATE_PX: f64 = 2.0;
@@ -656,6 +751,16 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// 3x3 around the guess, the weights `max(0, v - (bg + peak) / 2)`. `None`
 /// when the contrast is below `min_contrast` or the centroid runs away.
 fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
+    refine_with_contrast(frame, guess, radius_px, min_contrast).map(|(p, _)| p)
+}
+
+/// [`refine`], also returning the blob's contrast (grey levels).
+fn refine_with_contrast(
+    frame: &GreyFrame,
+    guess: PointPx,
+    radius_px: f64,
+    min_contrast: f32,
+) -> Option<(PointPx, f32)> {
     let rw = radius_px.ceil() as i64 + 2;
     // Guesses are >= 0: adding 0.5 and truncating rounds (no libm call).
     let (cx, cy) = ((guess.x + 0.5) as i64, (guess.y + 0.5) as i64);
@@ -709,7 +814,8 @@ fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) 
         x0 as f64 + sx as f64 / sw as f64,
         y0 as f64 + sy as f64 / sw as f64,
     );
-    ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64).then_some(c)
+    ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64)
+        .then_some((c, contrast))
 }
 
 #[cfg(test)]

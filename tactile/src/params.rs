@@ -152,6 +152,9 @@ pub struct MarkerParams {
     pub strength_ratio: f32,
     /// Minimum marker contrast over the local background, grey levels.
     pub min_contrast: f32,
+    /// Follow the rest markers in small windows and search the whole frame
+    /// only when that loses markers (see `markers::follow`).
+    pub follow: bool,
 }
 
 impl Default for MarkerParams {
@@ -161,6 +164,7 @@ impl Default for MarkerParams {
             binned: None,
             strength_ratio: 0.3,
             min_contrast: 6.0,
+            follow: true,
         }
     }
 }

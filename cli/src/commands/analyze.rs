@@ -21,7 +21,11 @@ use crate::shared::sources::load_sensor_config;
 #[derive(Debug, clap::Args)]
 pub struct AnalyzeArgs {
     /// Rest (no-contact) frame; repeat for several.
-    #[arg(long, value_name = "REST.png", required_unless_present = "rest_from_frames")]
+    #[arg(
+        long,
+        value_name = "REST.png",
+        required_unless_present = "rest_from_frames"
+    )]
     rest: Vec<PathBuf>,
     /// No rest frame: estimate the rest from the frames themselves (the
     /// pixel-wise median of up to 63 evenly spaced frames, then each

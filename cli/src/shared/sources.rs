@@ -31,9 +31,9 @@ use dexitac_rig::recording::{RecordedFrame, Recording, ReplaySource};
 use dexitac_rig::source::{Clock, FrameSource, SourceError, TimedFrame};
 use dexitac_rig::sources::{self, FolderSource, Pace};
 use dexitac_rig::task_loop::Sensor;
-use dexitac_tactile::area::{AreaSpec, MaskImage, WorkToInput};
 use dexitac_sim::plant::ContactState;
 use dexitac_sim::render::Renderer;
+use dexitac_tactile::area::{AreaSpec, MaskImage, WorkToInput};
 use dexitac_tactile::calibrate;
 use dexitac_tactile::frame::{self, GreyFrame};
 use dexitac_tactile::params::Params;
@@ -379,7 +379,11 @@ fn camera_sources(
         }
         let mode = cam.mode();
         out.push(SourceSetup {
-            map: frame::map_for(mode.width_px as usize, mode.height_px as usize, &params.frame),
+            map: frame::map_for(
+                mode.width_px as usize,
+                mode.height_px as usize,
+                &params.frame,
+            ),
             source: Box::new(cam),
             rest,
             label: format!("camera {id} (nothing may touch the fingertip at start)"),
