@@ -210,18 +210,19 @@ pub fn map_for(width: usize, height: usize, params: &FrameParams) -> WorkToInput
 }
 
 /// The working size for a `cw x ch` input region: the configured size, or
-/// with `keep_aspect` the largest size of the region's aspect ratio that
-/// fits in it (so a square crop of a 640x480 frame becomes 480x480, not a
-/// stretched 640x480).
+/// with `keep_aspect` the region's aspect ratio, scaled down to fit in the
+/// configured size and never up (a square 420x420 crop stays 420x420, a
+/// 1280x960 frame becomes 640x480, nothing is stretched; upscaling adds no
+/// information, only pixels to search).
 pub fn working_size(cw: usize, ch: usize, params: &FrameParams) -> (usize, usize) {
     let (ow, oh) = (
         params.work_width_px as usize,
         params.work_height_px as usize,
     );
-    if !params.keep_aspect || cw == 0 || ch == 0 || cw * oh == ch * ow {
+    if !params.keep_aspect || cw == 0 || ch == 0 {
         return (ow, oh);
     }
-    let s = (ow as f64 / cw as f64).min(oh as f64 / ch as f64);
+    let s = (ow as f64 / cw as f64).min(oh as f64 / ch as f64).min(1.0);
     (
         ((cw as f64 * s).round() as usize).clamp(1, ow),
         ((ch as f64 * s).round() as usize).clamp(1, oh),

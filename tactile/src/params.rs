@@ -120,9 +120,9 @@ pub struct FrameParams {
     pub crop_px: Option<[u32; 4]>,
     /// Sensor scale, mm per working pixel.
     pub mm_per_px: f64,
-    /// Keep the input's (or the crop's) aspect ratio: the working frame is
-    /// the largest of that ratio inside `work_width_px x work_height_px`.
-    /// `false` stretches to exactly that size.
+    /// Keep the input's (or the crop's) aspect ratio: the working frame has
+    /// that ratio, scaled down (never up) to fit in `work_width_px x
+    /// work_height_px`. `false` stretches to exactly that size.
     pub keep_aspect: bool,
 }
 
