@@ -262,18 +262,18 @@ impl Dome {
 
     /// The unit vector of the dome point seen at image point `p` (points
     /// beyond the equator map onto it).
-    pub fn lift(&self, centre: PointPx, p: PointPx) -> Vec3Px {
+    pub fn lift(&self, centre: PointPx, p: PointPx) -> DomePoint {
         let (x, y) = (
             (p.x - centre.x) / self.radius_px,
             (p.y - centre.y) / self.radius_px,
         );
         let r = x.hypot(y);
         let (x, y) = if r > 1.0 { (x / r, y / r) } else { (x, y) };
-        Vec3Px([x, y, (1.0 - x * x - y * y).max(0.0).sqrt()])
+        DomePoint([x, y, (1.0 - x * x - y * y).max(0.0).sqrt()])
     }
 
     /// The image point of the dome point with unit vector `v`.
-    pub fn project(&self, centre: PointPx, v: Vec3Px) -> PointPx {
+    pub fn project(&self, centre: PointPx, v: DomePoint) -> PointPx {
         PointPx::new(
             centre.x + self.radius_px * v.0[0],
             centre.y + self.radius_px * v.0[1],
@@ -296,7 +296,7 @@ impl Dome {
 
 /// A unit vector on a [`Dome`] (x right, y down, z towards the camera).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Vec3Px(pub [f64; 3]);
+pub struct DomePoint(pub [f64; 3]);
 
 /// Low-contrast skin texture: smooth value noise (two octaves, quintic
 /// interpolation of hashed lattice values) of a few grey levels, inside the
@@ -797,7 +797,7 @@ impl SensorSpec {
                 m = rotate(m, axis, arc / dome.radius_px);
             }
         }
-        dome.project(self.centre, Vec3Px(m))
+        dome.project(self.centre, DomePoint(m))
     }
 
     /// Where the indenter's centre of `press` appears in the image (the
@@ -823,7 +823,7 @@ impl SensorSpec {
                     }
                     None => c,
                 };
-                dome.project(self.centre, Vec3Px(m))
+                dome.project(self.centre, DomePoint(m))
             }
         }
     }
