@@ -8,13 +8,23 @@
 //! a contact category without a reported contact is a miss, a reported
 //! contact on a no-contact frame is a false positive. Times are the
 //! pipeline's single-thread stage times (rendering and calibration excluded).
+//!
+//! Each frame also counts markers against the generator's truth: the true
+//! (visible) markers, the detected ones, the true markers with a detection
+//! within a quarter pitch, and the detections outside the sensing area (a
+//! housing's LEDs, specks, reflections); and the signed radial error of the
+//! centre (towards the rim positive), for the rim bias. The condition
+//! categories ([`Category::CONDITIONS`]: light change, blur, texture, dome,
+//! housing, two-colour pins, rim clamp) are evaluated the same way
+//! ([`evaluate_each`], [`conditions_markdown`], [`conditions_report`]).
 
 use std::fmt::Write as _;
 
 use crate::calibrate::{self, CalibrationError};
 use crate::params::{CentreMethod, DensityMode, Params, ThresholdMode};
 use crate::pipeline::{Pipeline, StageTimes};
-use crate::synth::{self, Category};
+use crate::synth::{self, Category, SynthFrame};
+use crate::PointPx;
 
 /// A named pipeline configuration.
 #[derive(Debug, Clone)]
@@ -100,6 +110,64 @@ pub struct Sample {
     pub density_cells: usize,
     /// Stage times.
     pub times: StageTimes,
+    /// Markers counted against the truth.
+    pub markers: MarkerCounts,
+    /// Signed radial centre error against the nearest true contact, px:
+    /// the reported centre's offset along the direction from the sensing
+    /// area's centre to the true centre (positive: towards the rim; `None`:
+    /// no contact reported or no true contact).
+    pub radial_error_px: Option<f64>,
+}
+
+/// Detected markers of one frame against the generator's truth.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MarkerCounts {
+    /// True visible markers (all inside the sensing area).
+    pub truth: usize,
+    /// Detected markers.
+    pub detected: usize,
+    /// True markers with a detection within a quarter pitch.
+    pub matched: usize,
+    /// Detections outside the sensing area.
+    pub outside: usize,
+}
+
+impl MarkerCounts {
+    /// Counts `detected` against the truth of `frame` (`pitch_px`: the
+    /// sensor's pitch).
+    pub fn of(frame: &SynthFrame, detected: &[PointPx], pitch_px: f64) -> Self {
+        let radius = 0.25 * pitch_px;
+        let cell = radius.max(1.0);
+        let mut grid: std::collections::HashMap<(i64, i64), Vec<PointPx>> =
+            std::collections::HashMap::new();
+        let key = |p: &PointPx| ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64);
+        for p in detected {
+            grid.entry(key(p)).or_default().push(*p);
+        }
+        let matched = frame
+            .markers
+            .iter()
+            .filter(|t| {
+                let (i, j) = key(t);
+                (i - 1..=i + 1).any(|a| {
+                    (j - 1..=j + 1).any(|b| {
+                        grid.get(&(a, b)).is_some_and(|v| {
+                            v.iter().any(|p| (p.x - t.x).hypot(p.y - t.y) <= radius)
+                        })
+                    })
+                })
+            })
+            .count();
+        Self {
+            truth: frame.markers.len(),
+            detected: detected.len(),
+            matched,
+            outside: detected
+                .iter()
+                .filter(|p| !frame.area.contains(**p))
+                .count(),
+        }
+    }
 }
 
 /// Runs `setting` on `frames` seeded scenes of each category at `width x
@@ -114,39 +182,97 @@ pub fn evaluate(
 ) -> Result<Vec<Sample>, CalibrationError> {
     let mut out = Vec::new();
     for (ci, &cat) in categories.iter().enumerate() {
-        // Several sensors per category (marker size and lattice offset vary
-        // with the sensor seed), each with its own rest frame; frame k uses
-        // sensor k mod SENSORS_PER_CATEGORY.
-        let mut sensors = Vec::new();
-        for j in 0..SENSORS_PER_CATEGORY.min(frames.max(1)) {
-            let sensor_seed = seed.wrapping_add((ci * SENSORS_PER_CATEGORY + j) as u64);
-            let sensor = cat.sensor(width, height, sensor_seed);
-            let rest = synth::rest_frame(&sensor, sensor_seed ^ 0xA5A5);
-            let cal = calibrate::calibrate(&[rest.image], &setting.params)?;
-            sensors.push((sensor, Pipeline::new(cal, setting.params.clone())));
-        }
-        for k in 0..frames {
-            let (sensor, pipeline) = &sensors[k % sensors.len()];
-            let scene = cat.scene(sensor, seed.wrapping_mul(1000).wrapping_add(k as u64));
-            let frame = synth::render(&scene);
-            // Invariant: the frame is rendered at the calibrated size.
-            let r = pipeline.run(&frame.image).expect("same size as rest");
-            let error_px = r.contact.map(|c| {
-                frame
-                    .contacts
-                    .iter()
-                    .map(|t| (t.x - c.centre.x).hypot(t.y - c.centre.y))
-                    .fold(f64::INFINITY, f64::min)
-            });
-            out.push(Sample {
-                category: cat,
-                has_truth: !frame.contacts.is_empty(),
-                error_px,
-                skipped: r.skipped,
-                density_cells: r.density_cells,
-                times: r.times,
-            });
-        }
+        out.extend(evaluate_category(
+            setting, cat, ci, frames, width, height, seed,
+        )?);
+    }
+    Ok(out)
+}
+
+/// As [`evaluate`], but a category whose rest frame does not calibrate
+/// gives its error and the others still run (the same sensors and scenes as
+/// [`evaluate`] on the same list).
+pub fn evaluate_each(
+    setting: &Setting,
+    categories: &[Category],
+    frames: usize,
+    width: usize,
+    height: usize,
+    seed: u64,
+) -> Vec<(Category, Result<Vec<Sample>, CalibrationError>)> {
+    categories
+        .iter()
+        .enumerate()
+        .map(|(ci, &cat)| {
+            (
+                cat,
+                evaluate_category(setting, cat, ci, frames, width, height, seed),
+            )
+        })
+        .collect()
+}
+
+/// The samples of category `cat` at index `ci` of the evaluated list (the
+/// index picks the sensor seeds).
+fn evaluate_category(
+    setting: &Setting,
+    cat: Category,
+    ci: usize,
+    frames: usize,
+    width: usize,
+    height: usize,
+    seed: u64,
+) -> Result<Vec<Sample>, CalibrationError> {
+    // Several sensors per category (marker size and lattice offset vary
+    // with the sensor seed), each with its own rest frame; frame k uses
+    // sensor k mod SENSORS_PER_CATEGORY.
+    let mut sensors = Vec::new();
+    for j in 0..SENSORS_PER_CATEGORY.min(frames.max(1)) {
+        let sensor_seed = seed.wrapping_add((ci * SENSORS_PER_CATEGORY + j) as u64);
+        let sensor = cat.sensor(width, height, sensor_seed);
+        let rest = synth::rest_frame(&sensor, sensor_seed ^ 0xA5A5);
+        let cal = calibrate::calibrate(&[rest.image], &setting.params)?;
+        sensors.push((sensor, Pipeline::new(cal, setting.params.clone())));
+    }
+    let mut out = Vec::with_capacity(frames);
+    for k in 0..frames {
+        let (sensor, pipeline) = &sensors[k % sensors.len()];
+        let scene = cat.scene(sensor, seed.wrapping_mul(1000).wrapping_add(k as u64));
+        let frame = synth::render(&scene);
+        // Invariant: the frame is rendered at the calibrated size.
+        let r = pipeline.run(&frame.image).expect("same size as rest");
+        let nearest = r.contact.as_ref().and_then(|c| {
+            frame
+                .contacts
+                .iter()
+                .map(|t| (*t, (t.x - c.centre.x).hypot(t.y - c.centre.y)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map(|(t, e)| (t, e, c.centre))
+        });
+        let error_px = r
+            .contact
+            .as_ref()
+            .map(|_| nearest.map_or(f64::INFINITY, |n| n.1));
+        let radial_error_px = nearest.map(|(t, _, c)| {
+            let o = frame.area.centre;
+            let (nx, ny) = (t.x - o.x, t.y - o.y);
+            let n = nx.hypot(ny);
+            if n < 1e-9 {
+                0.0
+            } else {
+                ((c.x - t.x) * nx + (c.y - t.y) * ny) / n
+            }
+        });
+        out.push(Sample {
+            category: cat,
+            has_truth: !frame.contacts.is_empty(),
+            error_px,
+            skipped: r.skipped,
+            density_cells: r.density_cells,
+            times: r.times,
+            markers: MarkerCounts::of(&frame, &r.markers.positions(), sensor.pitch_px),
+            radial_error_px,
+        });
     }
     Ok(out)
 }
@@ -158,6 +284,8 @@ pub struct Summary {
     pub category: Category,
     /// Frames.
     pub frames: usize,
+    /// Frames with a true contact.
+    pub contact_frames: usize,
     /// Contacts reported on frames with a true contact.
     pub found: usize,
     /// Contacts reported on frames without one.
@@ -171,6 +299,20 @@ pub struct Summary {
     pub skipped: f64,
     /// Median stage times.
     pub median: StageTimes,
+    /// Median true marker count per frame.
+    pub markers_truth_median: f64,
+    /// Median detected marker count per frame.
+    pub markers_detected_median: f64,
+    /// Median count of true markers with a detection within a quarter
+    /// pitch.
+    pub markers_matched_median: f64,
+    /// Median count of detections outside the sensing area.
+    pub markers_outside_median: f64,
+    /// Largest count of detections outside the sensing area in a frame.
+    pub markers_outside_max: usize,
+    /// Median signed radial centre error, px (positive: towards the rim;
+    /// NaN if no contact was reported).
+    pub radial_error_median_px: f64,
 }
 
 /// Summarises the samples of one category.
@@ -185,6 +327,7 @@ pub fn summarize(category: Category, samples: &[Sample]) -> Summary {
     Summary {
         category,
         frames: s.len(),
+        contact_frames: s.iter().filter(|s| s.has_truth).count(),
         found: s
             .iter()
             .filter(|s| s.has_truth && s.error_px.is_some())
@@ -202,6 +345,18 @@ pub fn summarize(category: Category, samples: &[Sample]) -> Summary {
             segment_ms: med(&|x| x.times.segment_ms),
             total_ms: med(&|x| x.times.total_ms),
         },
+        markers_truth_median: med(&|x| x.markers.truth as f64),
+        markers_detected_median: med(&|x| x.markers.detected as f64),
+        markers_matched_median: med(&|x| x.markers.matched as f64),
+        markers_outside_median: med(&|x| x.markers.outside as f64),
+        markers_outside_max: s.iter().map(|x| x.markers.outside).max().unwrap_or(0),
+        radial_error_median_px: quantile(
+            s.iter()
+                .filter(|s| s.has_truth)
+                .filter_map(|s| s.radial_error_px)
+                .collect(),
+            0.5,
+        ),
     }
 }
 
@@ -244,9 +399,118 @@ pub fn markdown(setting: &str, summaries: &[Summary]) -> String {
     s
 }
 
+/// Markdown table of the summaries of one setting on the condition
+/// categories: marker counts against the truth, contacts found on contact
+/// frames and reported on no-contact frames, centre error (and its signed
+/// radial part), total time. `failed` lists categories whose rest frame did
+/// not calibrate.
+pub fn conditions_markdown(
+    setting: &str,
+    summaries: &[Summary],
+    failed: &[(Category, String)],
+) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "#### {setting}\n");
+    let _ = writeln!(
+        s,
+        "| scene | frames | markers true | detected | matched | outside area (max) | found | false + | err median px | err p95 px | radial err median px | total ms |"
+    );
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for m in summaries {
+        let _ = writeln!(
+            s,
+            "| {} | {} | {:.0} | {:.0} | {:.0} | {:.0} ({}) | {}/{} | {}/{} | {:.2} | {:.2} | {:+.2} | {:.3} |",
+            m.category.name(),
+            m.frames,
+            m.markers_truth_median,
+            m.markers_detected_median,
+            m.markers_matched_median,
+            m.markers_outside_median,
+            m.markers_outside_max,
+            m.found,
+            m.contact_frames,
+            m.false_positives,
+            m.frames - m.contact_frames,
+            m.error_median_px,
+            m.error_p95_px,
+            m.radial_error_median_px,
+            m.median.total_ms
+        );
+    }
+    for (c, e) in failed {
+        let _ = writeln!(
+            s,
+            "| {} | calibration failed: {e} | | | | | | | | | | |",
+            c.name()
+        );
+    }
+    s
+}
+
+/// The condition categories' table ([`conditions_markdown`]) for each
+/// setting of [`settings`] whose name is in `names` (all when empty), at
+/// 640x480 with `frames` frames per category.
+pub fn conditions_report(names: &[&str], frames: usize, seed: u64) -> String {
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "### Condition categories (640x480, seed {seed}, {frames} frames per scene, {SENSORS_PER_CATEGORY} sensors each)\n"
+    );
+    for setting in settings() {
+        if !names.is_empty() && !names.contains(&setting.name) {
+            continue;
+        }
+        let mut sums = Vec::new();
+        let mut failed = Vec::new();
+        for (cat, r) in evaluate_each(&setting, &Category::CONDITIONS, frames, 640, 480, seed) {
+            match r {
+                Ok(samples) => sums.push(summarize(cat, &samples)),
+                Err(e) => failed.push((cat, e.to_string())),
+            }
+        }
+        let _ = writeln!(out, "{}", conditions_markdown(setting.name, &sums, &failed));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Prints the condition categories' table for the default setting
+    /// (`cargo test --release -p dexitac-tactile --features synth --lib
+    /// conditions_report -- --ignored --nocapture`; env `DEXITAC_FRAMES`,
+    /// `DEXITAC_SEED`, `DEXITAC_SETTINGS=all`).
+    #[test]
+    #[ignore = "a benchmark run, minutes in debug"]
+    fn conditions_report_of_the_default_setting() {
+        let env = |k: &str| std::env::var(k).ok();
+        let frames = env("DEXITAC_FRAMES")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(40);
+        let seed = env("DEXITAC_SEED")
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(1);
+        let names: Vec<&str> = match env("DEXITAC_SETTINGS").as_deref() {
+            Some("all") => vec![],
+            _ => vec!["default: fast s8, relative, skip+ROI, tracking"],
+        };
+        println!("{}", conditions_report(&names, frames, seed));
+    }
+
+    #[test]
+    fn marker_counts_match_within_a_quarter_pitch_and_flag_outside() {
+        let sensor = Category::Housing.sensor(320, 240, 1);
+        let f = synth::rest_frame(&sensor, 2);
+        let mut detected: Vec<PointPx> = f.markers.iter().skip(3).copied().collect();
+        detected[0].x += 0.3 * sensor.pitch_px;
+        detected.extend(f.distractors.iter().map(|d| d.at));
+        let c = MarkerCounts::of(&f, &detected, sensor.pitch_px);
+        assert_eq!(c.truth, f.markers.len());
+        assert_eq!(c.detected, detected.len());
+        assert_eq!(c.matched, f.markers.len() - 4);
+        assert_eq!(c.outside, f.distractors.len());
+    }
 
     #[test]
     fn quantile_is_nearest_rank() {

@@ -16,7 +16,9 @@ pub struct SynthArgs {
     #[arg(long, value_name = "DIR")]
     out: PathBuf,
     /// Scene category: nominal, edge, large, small, two, shear, degraded,
-    /// saturated, dropout, rounded_rect, no_contact.
+    /// saturated, dropout, rounded_rect, no_contact; or a condition
+    /// category (`synth::Category::CONDITIONS`): dim, overexposed, blurred,
+    /// textured, dome, housing, two_colour, rim_clamped, tactip.
     #[arg(long, default_value = "nominal")]
     category: String,
     /// Number of frames.
@@ -42,9 +44,7 @@ impl SynthArgs {
 }
 
 fn run_inner(args: &SynthArgs) -> anyhow::Result<()> {
-    let cat = Category::ALL
-        .into_iter()
-        .find(|c| c.name() == args.category)
+    let cat = Category::from_name(&args.category)
         .ok_or_else(|| anyhow!("unknown category {:?}", args.category))?;
     if !(32..=4096).contains(&args.width) || !(32..=4096).contains(&args.height) {
         return Err(anyhow!("width and height must be 32..=4096"));
