@@ -428,7 +428,13 @@ mod tests {
             channels: 1,
             data: &data,
         };
-        let p = prepare(&raw, &params(4, 2)).unwrap();
+        // Upscaling only happens when asked to stretch.
+        assert_eq!(prepare(&raw, &params(4, 2)).unwrap().grey.width(), 2);
+        let stretch = FrameParams {
+            keep_aspect: false,
+            ..params(4, 2)
+        };
+        let p = prepare(&raw, &stretch).unwrap();
         assert_eq!(p.grey.width(), 4);
         assert_eq!(p.grey.data()[0], 0);
         assert_eq!(p.grey.data()[3], 255);
