@@ -124,10 +124,11 @@ pub const REST_FROM_FRAMES_MAX: usize = 63;
 
 /// A rest calibration for a data set without a rest frame, estimated from
 /// the frames themselves: the pixel-wise median of up to
-/// [`REST_FROM_FRAMES_MAX`] evenly spaced frames gives the detector, the
-/// sensing area and the lattice; each marker's rest position is then the
-/// median of its positions over the frames in which it is found near its
-/// place (within half a pitch).
+/// [`REST_FROM_FRAMES_MAX`] evenly spaced frames gives the detector's
+/// thresholds; the frame with the most markers (or the median image, if it
+/// has more) gives the lattice and the sensing area; each marker's rest
+/// position is then the median of its positions over the frames in which
+/// it is found near its place (within half a pitch).
 ///
 /// What it can see: any part of the skin that is untouched in more than
 /// half of the frames is at its true rest. What it cannot: a contact that
@@ -152,7 +153,21 @@ pub fn calibrate_from_frames(
     let given = SensingArea::from_spec(&params.area, params.area_mask.as_ref(), w, h, map)?;
     let mut detector = markers::auto_detector(&median, &params.markers)?;
     detector.area = given.clone();
-    let anchors = markers::detect(&median, &detector).positions();
+    // The anchor lattice: the frame (the median image among them) with the
+    // most markers. In a tap data set the median image loses the pins that
+    // move differently in every frame (the middle of the skin), while the
+    // lightest tap shows nearly all of them.
+    let detections: Vec<Vec<PointPx>> = picked
+        .iter()
+        .map(|f| markers::detect(f, &detector).positions())
+        .collect();
+    let from_median = markers::detect(&median, &detector).positions();
+    let anchors = detections
+        .iter()
+        .max_by_key(|d| d.len())
+        .filter(|d| d.len() > from_median.len())
+        .cloned()
+        .unwrap_or(from_median);
     if anchors.len() < MIN_REST_MARKERS {
         return Err(CalibrationError::TooFewMarkers {
             found: anchors.len(),
@@ -160,11 +175,10 @@ pub fn calibrate_from_frames(
     }
     let reach = 0.5 * median_spacing(&anchors);
     let mut seen: Vec<Vec<PointPx>> = vec![Vec::new(); anchors.len()];
-    for frame in &picked {
-        let found = markers::detect(frame, &detector).positions();
-        let index = PointIndex::new(&found, w, h, reach);
+    for found in &detections {
+        let index = PointIndex::new(found, w, h, reach);
         for (s, a) in seen.iter_mut().zip(&anchors) {
-            if let Some((k, _)) = index.nearest(&found, *a, reach) {
+            if let Some((k, _)) = index.nearest(found, *a, reach) {
                 s.push(found[k]);
             }
         }

@@ -174,6 +174,7 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         )
     };
     for (x, y, peak) in bright_peaks(img, w, h, margin, &env, det.min_level_ratio) {
+        let (x, y) = plateau_centre(img, w, h, x, y, margin);
         let (lo, range) = env.at(x, y);
         let d = determinant_at(&ii, w + 1, x, y, lobe);
         let strength = d.sqrt();
@@ -300,6 +301,25 @@ pub const FOLLOW_MAX_LOST: f64 = 0.01;
 /// A followed marker below this fraction of the frame's median marker
 /// contrast is lost (faded, covered).
 pub const FOLLOW_MIN_CONTRAST: f32 = 0.3;
+
+/// The middle of the flat top that starts at candidate `(x, y)` (a
+/// saturated or binarised marker's maxima form a plateau, and its first
+/// pixel in raster order sits on its upper-left edge, where the determinant
+/// is weak): the middle of its first row, then the middle of the column
+/// down from there; kept `margin` px inside the image.
+fn plateau_centre(img: &[u8], w: usize, h: usize, x: usize, y: usize, margin: usize) -> (usize, usize) {
+    let v = img[y * w + x];
+    let row = &img[y * w..(y + 1) * w];
+    let run_x = row[x..w - margin].iter().take_while(|&&p| p == v).count();
+    if run_x <= 1 && img[(y + 1) * w + x] != v {
+        return (x, y);
+    }
+    let xm = x + (run_x.max(1) - 1) / 2;
+    let run_y = (y..h - margin)
+        .take_while(|&yy| img[yy * w + xm] == v)
+        .count();
+    (xm, y + (run_y.max(1) - 1) / 2)
+}
 
 /// The local light envelope: per cell, the darkest and brightest level over
 /// the cell and its 8 neighbours.
