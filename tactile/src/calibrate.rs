@@ -128,7 +128,8 @@ pub const REST_FROM_FRAMES_MAX: usize = 63;
 /// thresholds; the frame with the most markers (or the median image, if it
 /// has more) gives the lattice and the sensing area; each marker's rest
 /// position is then the median of its positions over the frames in which
-/// it is found near its place (within half a pitch).
+/// it is found near its place (within half a pitch); markers found in
+/// fewer than half of the frames are dropped.
 ///
 /// What it can see: any part of the skin that is untouched in more than
 /// half of the frames is at its true rest. What it cannot: a contact that
@@ -183,13 +184,12 @@ pub fn calibrate_from_frames(
             }
         }
     }
-    let stable: Vec<PointPx> = anchors
-        .iter()
-        .zip(seen)
-        .map(|(a, s)| {
-            if 2 * s.len() < picked.len() {
-                return *a;
-            }
+    // A marker of the anchor frame found in under half the frames is not a
+    // pin (debris, a flickering speck) and is dropped.
+    let stable: Vec<PointPx> = seen
+        .into_iter()
+        .filter(|s| 2 * s.len() >= picked.len())
+        .map(|s| {
             let mut xs: Vec<f64> = s.iter().map(|p| p.x).collect();
             let mut ys: Vec<f64> = s.iter().map(|p| p.y).collect();
             let k = xs.len() / 2;
