@@ -163,12 +163,26 @@ pub fn calibrate_from_frames(
         .map(|f| markers::detect(f, &detector).positions())
         .collect();
     let from_median = markers::detect(&median, &detector).positions();
-    let anchors = detections
-        .iter()
-        .max_by_key(|d| d.len())
-        .filter(|d| d.len() > from_median.len())
-        .cloned()
-        .unwrap_or(from_median);
+    let anchors = if from_median.len() >= MIN_REST_MARKERS {
+        // The frame that agrees best with the median image: the most of its
+        // markers within a fifth of a pitch of a median-image marker (the
+        // lightest tap).
+        let close = 0.2 * median_spacing(&from_median);
+        let index = PointIndex::new(&from_median, w, h, close);
+        let agree = |d: &Vec<PointPx>| {
+            d.iter()
+                .filter(|p| index.nearest(&from_median, **p, close).is_some())
+                .count()
+        };
+        detections
+            .iter()
+            .max_by_key(|d| agree(d))
+            .filter(|d| d.len() > from_median.len())
+            .cloned()
+            .unwrap_or(from_median)
+    } else {
+        detections.iter().max_by_key(|d| d.len()).cloned().unwrap_or(from_median)
+    };
     if anchors.len() < MIN_REST_MARKERS {
         return Err(CalibrationError::TooFewMarkers {
             found: anchors.len(),
