@@ -95,7 +95,7 @@ pub fn calibrate_mapped(
     let mut detector = markers::auto_detector(first, &params.markers)?;
     detector.area = given.clone();
     let mut sums: Vec<(PointPx, usize)> = markers::detect(first, &detector)
-        .positions()
+        .typical_positions()
         .into_iter()
         .map(|p| (p, 1))
         .collect();
@@ -160,9 +160,9 @@ pub fn calibrate_from_frames(
     // lightest tap shows nearly all of them.
     let detections: Vec<Vec<PointPx>> = picked
         .iter()
-        .map(|f| markers::detect(f, &detector).positions())
+        .map(|f| markers::detect(f, &detector).typical_positions())
         .collect();
-    let from_median = markers::detect(&median, &detector).positions();
+    let from_median = markers::detect(&median, &detector).typical_positions();
     let anchors = if from_median.len() >= MIN_REST_MARKERS {
         // The frame that agrees best with the median image: the most of its
         // markers within a fifth of a pitch of a median-image marker (the

@@ -75,6 +75,9 @@ pub struct Marker {
     pub rel_level: f32,
     /// Blob strength over the local range (see [`Detector`]).
     pub rel_strength: f32,
+    /// Effective area above half maximum, px^2 (an LED or a reflection is
+    /// several times a pin's, a dust speck a fraction).
+    pub area_px: f32,
 }
 
 /// The markers of one frame.
@@ -98,6 +101,18 @@ impl Markers {
     /// Marker positions.
     pub fn positions(&self) -> Vec<PointPx> {
         self.list.iter().map(|m| m.pos).collect()
+    }
+
+    /// Positions of the markers of typical size: effective area within
+    /// [`SIZE_RANGE`] times the median (drops LEDs, reflections and specks
+    /// from a rest frame).
+    pub fn typical_positions(&self) -> Vec<PointPx> {
+        let median = percentile(self.list.iter().map(|m| m.area_px).collect(), 0.5);
+        self.list
+            .iter()
+            .filter(|m| m.area_px >= SIZE_RANGE.0 * median && m.area_px <= SIZE_RANGE.1 * median)
+            .map(|m| m.pos)
+            .collect()
     }
 }
 
@@ -188,14 +203,16 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         // A saturated marker's candidate is its plateau's first pixel, off
         // the centre: one more pass from the first centroid re-centres the
         // window on the blob.
-        let refined = refine(frame, guess, det.radius_px, det.min_contrast).and_then(|p| {
-            if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
-                refine(frame, p, det.radius_px, det.min_contrast)
-            } else {
-                Some(p)
-            }
-        });
-        if let Some(pos) = refined {
+        let refined = refine_with_contrast(frame, guess, det.radius_px, det.min_contrast)
+            .and_then(|r| {
+                let p = r.0;
+                if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
+                    refine_with_contrast(frame, p, det.radius_px, det.min_contrast)
+                } else {
+                    Some(r)
+                }
+            });
+        if let Some((pos, _, area_px)) = refined {
             if det.area.as_ref().is_some_and(|a| !a.contains(pos)) {
                 continue;
             }
@@ -206,6 +223,7 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
                     peak,
                     rel_level: (peak as f32 - lo) / range,
                     rel_strength: strength / range,
+                    area_px,
                 });
             }
         }
@@ -230,16 +248,16 @@ pub fn follow(
 ) -> Option<Markers> {
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
     let mut lost = 0usize;
-    let mut found: Vec<(PointPx, f32)> = Vec::with_capacity(near.len());
+    let mut found: Vec<(PointPx, f32, f32)> = Vec::with_capacity(near.len());
     for &p in near {
         let mut at = p;
         let mut hit = None;
         for _ in 0..FOLLOW_PASSES {
             match refine_with_contrast(frame, at, det.radius_px, det.min_contrast) {
-                Some((c, contrast)) => {
+                Some((c, contrast, area)) => {
                     let step = (c.x - at.x).hypot(c.y - at.y);
                     at = c;
-                    hit = Some(contrast);
+                    hit = Some((contrast, area));
                     if step < FOLLOW_SETTLED_PX {
                         break;
                     }
@@ -255,7 +273,7 @@ pub fn follow(
                 && det.area.as_ref().is_none_or(|a| a.contains(at))
         });
         match kept {
-            Some(contrast) => found.push((at, contrast)),
+            Some((contrast, area)) => found.push((at, contrast, area)),
             None => {
                 lost += 1;
                 if lost > max_lost {
@@ -273,7 +291,7 @@ pub fn follow(
     }
     let mut taken = Occupancy::new(frame.width(), frame.height());
     let mut list: Vec<Marker> = Vec::with_capacity(found.len());
-    for (pos, contrast) in found {
+    for (pos, contrast, area_px) in found {
         if !taken.claim(pos, DUPLICATE_PX, &list) {
             // Two markers ran into one blob: a contact squeezes them; the
             // full search sorts that out.
@@ -285,6 +303,7 @@ pub fn follow(
             peak: 0,
             rel_level: 1.0,
             rel_strength: contrast / median.max(1.0),
+            area_px,
         });
     }
     Some(Markers { list })
@@ -389,6 +408,10 @@ impl Envelope {
         (self.lo[k], self.range[k])
     }
 }
+
+/// A rest marker's effective area must be within these multiples of the
+/// median to be a pin.
+pub const SIZE_RANGE: (f32, f32) = (0.3, 2.5);
 
 /// A first centroid this far from its candidate (px, either axis) is refined
 /// once more around itself.
@@ -771,16 +794,17 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// 3x3 around the guess, the weights `max(0, v - (bg + peak) / 2)`. `None`
 /// when the contrast is below `min_contrast` or the centroid runs away.
 fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
-    refine_with_contrast(frame, guess, radius_px, min_contrast).map(|(p, _)| p)
+    refine_with_contrast(frame, guess, radius_px, min_contrast).map(|(p, ..)| p)
 }
 
-/// [`refine`], also returning the blob's contrast (grey levels).
+/// [`refine`], also returning the blob's contrast (grey levels) and its
+/// effective area above half maximum (px^2).
 fn refine_with_contrast(
     frame: &GreyFrame,
     guess: PointPx,
     radius_px: f64,
     min_contrast: f32,
-) -> Option<(PointPx, f32)> {
+) -> Option<(PointPx, f32, f32)> {
     let rw = radius_px.ceil() as i64 + 2;
     // Guesses are >= 0: adding 0.5 and truncating rounds (no libm call).
     let (cx, cy) = ((guess.x + 0.5) as i64, (guess.y + 0.5) as i64);
@@ -834,8 +858,11 @@ fn refine_with_contrast(
         x0 as f64 + sx as f64 / sw as f64,
         y0 as f64 + sy as f64 / sw as f64,
     );
+    // Effective area above half maximum: the weight over the peak's
+    // height above the cut (a flat top's own area, a Gaussian's half).
+    let area = sw as f32 / (hi - cut).max(1) as f32;
     ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64)
-        .then_some((c, contrast))
+        .then_some((c, contrast, area))
 }
 
 #[cfg(test)]
