@@ -181,7 +181,11 @@ pub fn calibrate_from_frames(
             .cloned()
             .unwrap_or(from_median)
     } else {
-        detections.iter().max_by_key(|d| d.len()).cloned().unwrap_or(from_median)
+        detections
+            .iter()
+            .max_by_key(|d| d.len())
+            .cloned()
+            .unwrap_or(from_median)
     };
     if anchors.len() < MIN_REST_MARKERS {
         return Err(CalibrationError::TooFewMarkers {

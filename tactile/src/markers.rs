@@ -203,8 +203,8 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         // A saturated marker's candidate is its plateau's first pixel, off
         // the centre: one more pass from the first centroid re-centres the
         // window on the blob.
-        let refined = refine_with_contrast(frame, guess, det.radius_px, det.min_contrast)
-            .and_then(|r| {
+        let refined =
+            refine_with_contrast(frame, guess, det.radius_px, det.min_contrast).and_then(|r| {
                 let p = r.0;
                 if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
                     refine_with_contrast(frame, p, det.radius_px, det.min_contrast)
@@ -326,7 +326,14 @@ pub const FOLLOW_MIN_CONTRAST: f32 = 0.3;
 /// pixel in raster order sits on its upper-left edge, where the determinant
 /// is weak): the middle of its first row, then the middle of the column
 /// down from there; kept `margin` px inside the image.
-fn plateau_centre(img: &[u8], w: usize, h: usize, x: usize, y: usize, margin: usize) -> (usize, usize) {
+fn plateau_centre(
+    img: &[u8],
+    w: usize,
+    h: usize,
+    x: usize,
+    y: usize,
+    margin: usize,
+) -> (usize, usize) {
     let v = img[y * w + x];
     let row = &img[y * w..(y + 1) * w];
     let run_x = row[x..w - margin].iter().take_while(|&&p| p == v).count();

@@ -167,7 +167,10 @@ fn tiny_and_huge_inputs_are_rescaled_or_rejected() {
         let p = frame::prepare(&raw, &fp).unwrap();
         let (gw, gh) = (p.grey.width(), p.grey.height());
         // The input's aspect, scaled down (never up) to fit 640x480.
-        assert!(gw == 640 || gh == 480 || (gw, gh) == (w, h), "{w}x{h} -> {gw}x{gh}");
+        assert!(
+            gw == 640 || gh == 480 || (gw, gh) == (w, h),
+            "{w}x{h} -> {gw}x{gh}"
+        );
         assert!(gw <= 640 && gh <= 480 && gw <= w && gh <= h);
         let aspect = |a: usize, b: usize| a as f64 / b as f64;
         assert!((aspect(gw, gh) - aspect(w, h)).abs() <= aspect(w, h) / gh.min(gw) as f64);

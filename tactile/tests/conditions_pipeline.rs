@@ -1,0 +1,163 @@
+//! The pipeline under conditions its thresholds were not set on: light,
+//! blur, saturation, texture, pins of two colours, a housing with LEDs and
+//! dust, a clamped rim and a dome (the generator's condition categories,
+//! `synth::Category::CONDITIONS`), a sensing area from the config, and a
+//! rest estimated from the frames. Bounds are the measured figures of
+//! BENCHMARKS.md ("Condition categories") with a margin.
+
+use dexitac_tactile::area::AreaSpec;
+use dexitac_tactile::bench::{self, Sample};
+use dexitac_tactile::calibrate;
+use dexitac_tactile::params::Params;
+use dexitac_tactile::synth::{self, Category};
+use dexitac_tactile::PointPx;
+
+const FRAMES: usize = 8;
+
+fn samples(cat: Category) -> Vec<Sample> {
+    let setting = bench::settings()
+        .into_iter()
+        .find(|s| s.name.starts_with("default"))
+        .expect("the default setting");
+    bench::evaluate(&setting, &[cat], FRAMES, 640, 480, 7).expect("calibrates")
+}
+
+/// Markers found within a quarter pitch / true markers, worst frame.
+fn worst_marker_share(s: &[Sample]) -> f64 {
+    s.iter()
+        .map(|s| s.markers.matched as f64 / s.markers.truth as f64)
+        .fold(1.0, f64::min)
+}
+
+/// (found / with contact, false contacts, median error, max error).
+fn contacts(s: &[Sample]) -> (usize, usize, usize, f64, f64) {
+    let with: Vec<&Sample> = s.iter().filter(|s| s.has_truth).collect();
+    let mut err: Vec<f64> = with.iter().filter_map(|s| s.error_px).collect();
+    err.sort_by(f64::total_cmp);
+    let false_pos = s
+        .iter()
+        .filter(|s| !s.has_truth && s.error_px.is_some())
+        .count();
+    let median = err.get(err.len() / 2).copied().unwrap_or(f64::NAN);
+    let max = err.last().copied().unwrap_or(f64::NAN);
+    (err.len(), with.len(), false_pos, median, max)
+}
+
+#[test]
+fn light_blur_saturation_texture_and_dim_pins_keep_every_marker_and_contact() {
+    for cat in [
+        Category::Dim,
+        Category::Overexposed,
+        Category::Blurred,
+        Category::Textured,
+        Category::TwoColour,
+    ] {
+        let s = samples(cat);
+        let share = worst_marker_share(&s);
+        assert!(
+            share >= 0.99,
+            "{cat:?}: worst frame found {share:.3} of the markers"
+        );
+        let (found, with, false_pos, median, max) = contacts(&s);
+        assert_eq!(
+            (found, false_pos),
+            (with, 0),
+            "{cat:?}: {found}/{with} contacts, {false_pos} false"
+        );
+        assert!(
+            median <= 0.4 && max <= 1.5,
+            "{cat:?}: centre error median {median:.2} px, max {max:.2} px"
+        );
+    }
+}
+
+#[test]
+fn housing_leds_and_dust_stay_out_and_give_no_false_contact() {
+    let s = samples(Category::Housing);
+    for x in &s {
+        // An LED that sits right against the outer ring can pass for a rim
+        // marker (BENCHMARKS.md); the dust and the rest of the housing not.
+        assert!(x.markers.outside <= 3, "{:?}", x.markers);
+    }
+    let (found, with, false_pos, median, _) = contacts(&s);
+    assert_eq!((found, false_pos), (with, 0));
+    assert!(median <= 0.4, "median {median:.2} px");
+}
+
+#[test]
+fn contacts_by_a_clamped_rim_have_no_radial_bias() {
+    let s = samples(Category::RimClamped);
+    let mut radial: Vec<f64> = s.iter().filter_map(|s| s.radial_error_px).collect();
+    radial.sort_by(f64::total_cmp);
+    let median = radial[radial.len() / 2];
+    assert!(
+        median.abs() <= 0.3,
+        "radial error median {median:.2} px (+ = towards the rim)"
+    );
+    let (found, with, false_pos, _, max) = contacts(&s);
+    assert_eq!((found, false_pos), (with, 0));
+    assert!(max <= 2.0, "max {max:.2} px");
+}
+
+#[test]
+fn domed_sensor_is_a_known_weak_spot() {
+    // Foreshortened displacement lines bias the tracked centre outwards by
+    // about 1 px (BENCHMARKS.md); the bounds document today's behaviour.
+    let s = samples(Category::Dome);
+    let share = worst_marker_share(&s);
+    assert!(share >= 0.95, "worst frame found {share:.3} of the markers");
+    let (found, with, false_pos, median, max) = contacts(&s);
+    assert_eq!((found, false_pos), (with, 0));
+    assert!(
+        median <= 2.0 && max <= 5.0,
+        "median {median:.2} px, max {max:.2} px"
+    );
+}
+
+#[test]
+fn a_sensing_area_from_the_config_drops_everything_outside_it() {
+    let sensor = Category::Nominal.sensor(640, 480, 3);
+    let rest = synth::rest_frame(&sensor, 1);
+    // Only the left half of the skin.
+    let params = Params {
+        area: AreaSpec::Polygon {
+            points_px: vec![[0.0, 0.0], [320.0, 0.0], [320.0, 480.0], [0.0, 480.0]],
+        },
+        ..Params::default()
+    };
+    let cal = calibrate::calibrate(&[rest.image.clone()], &params).unwrap();
+    let left = rest.markers.iter().filter(|p| p.x < 319.5).count();
+    assert!(cal.rest_markers.iter().all(|p| p.x <= 320.5));
+    assert!(
+        cal.rest_markers.len().abs_diff(left) <= 2,
+        "{} rest markers, {left} on the left",
+        cal.rest_markers.len()
+    );
+}
+
+#[test]
+fn rest_from_frames_recovers_the_rest_markers() {
+    // A tap data set: every frame has a contact, at random places.
+    let cat = Category::Nominal;
+    let sensor = cat.sensor(640, 480, 4);
+    let truth = synth::rest_frame(&sensor, 1).markers;
+    let frames: Vec<_> = (0..24)
+        .map(|k| synth::render(&cat.scene(&sensor, 40 + k)).image)
+        .collect();
+    let params = Params::default();
+    let cal = calibrate::calibrate_from_frames(
+        &frames,
+        &params,
+        dexitac_tactile::area::WorkToInput::IDENTITY,
+    )
+    .unwrap();
+    let near = |p: &PointPx, d: f64| truth.iter().any(|t| (t.x - p.x).hypot(t.y - p.y) <= d);
+    let close = cal.rest_markers.iter().filter(|p| near(p, 0.3)).count();
+    assert!(
+        close as f64 >= 0.97 * truth.len() as f64,
+        "{close} of {} rest markers within 0.3 px ({} estimated)",
+        truth.len(),
+        cal.rest_markers.len()
+    );
+    assert!(cal.rest_markers.iter().all(|p| near(p, 1.5)));
+}
