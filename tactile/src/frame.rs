@@ -98,6 +98,15 @@ impl GreyFrame {
         &self.data
     }
 
+    /// The negative (255 - v): dark markers become bright ones.
+    pub fn inverted(&self) -> GreyFrame {
+        GreyFrame {
+            width: self.width,
+            height: self.height,
+            data: self.data.iter().map(|&v| !v).collect(),
+        }
+    }
+
     /// Pixel at `(x, y)`, 0 outside the image.
     pub fn get(&self, x: i64, y: i64) -> u8 {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {

@@ -32,7 +32,7 @@
 
 use crate::area::SensingArea;
 use crate::frame::GreyFrame;
-use crate::params::MarkerParams;
+use crate::params::{MarkerParams, Polarity};
 use crate::PointPx;
 
 /// Candidate full-resolution lobes for the automatic scale search.
@@ -150,6 +150,9 @@ pub struct Detector {
     /// Keep only markers inside this area (`None`: all). The calibration
     /// sets it (see [`crate::area`]).
     pub area: Option<SensingArea>,
+    /// Dark markers on a bright skin (GelSight-type dots): the frame is
+    /// inverted before detection.
+    pub dark: bool,
 }
 
 /// A local range below this fraction of the frame's typical (75th
@@ -159,6 +162,13 @@ const RANGE_FLOOR_FRACTION: f32 = 0.2;
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
+    let inverted;
+    let frame = if det.dark {
+        inverted = frame.inverted();
+        &inverted
+    } else {
+        frame
+    };
     let (fw, fh) = (frame.width(), frame.height());
     let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
     let (x1, y1) = (x1.min(fw), y1.min(fh));
@@ -203,15 +213,14 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         // A saturated marker's candidate is its plateau's first pixel, off
         // the centre: one more pass from the first centroid re-centres the
         // window on the blob.
-        let refined =
-            refine_with_contrast(frame, guess, det.radius_px, det.min_contrast).and_then(|r| {
-                let p = r.0;
-                if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
-                    refine_with_contrast(frame, p, det.radius_px, det.min_contrast)
-                } else {
-                    Some(r)
-                }
-            });
+        let refined = refine(frame, guess, det.radius_px, det.min_contrast).and_then(|r| {
+            let p = r.0;
+            if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
+                refine(frame, p, det.radius_px, det.min_contrast)
+            } else {
+                Some(r)
+            }
+        });
         if let Some((pos, _, area_px)) = refined {
             if det.area.as_ref().is_some_and(|a| !a.contains(pos)) {
                 continue;
@@ -246,6 +255,13 @@ pub fn follow(
     near: &[PointPx],
     reach_px: f64,
 ) -> Option<Markers> {
+    let inverted;
+    let frame = if det.dark {
+        inverted = frame.inverted();
+        &inverted
+    } else {
+        frame
+    };
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
     let mut lost = 0usize;
     let mut found: Vec<(PointPx, f32, f32)> = Vec::with_capacity(near.len());
@@ -253,7 +269,7 @@ pub fn follow(
         let mut at = p;
         let mut hit = None;
         for _ in 0..FOLLOW_PASSES {
-            match refine_with_contrast(frame, at, det.radius_px, det.min_contrast) {
+            match refine(frame, at, det.radius_px, det.min_contrast) {
                 Some((c, contrast, area)) => {
                     let step = (c.x - at.x).hypot(c.y - at.y);
                     at = c;
@@ -576,8 +592,45 @@ fn determinant_at(ii: &[u32], s: usize, x: usize, y: usize, lobe: usize) -> f32 
 }
 
 /// Finds the marker scale and threshold from a rest (no-contact) frame.
-/// `params.lobe_px` / `params.binned` override the search.
+/// `params.lobe_px` / `params.binned` override the search. With
+/// `params.polarity = auto` both bright markers (TacTip pins) and dark ones
+/// (GelSight / GelSlim dots) are tried; the one whose markers form the
+/// larger regular lattice wins.
 pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector, MarkerError> {
+    match params.polarity {
+        Polarity::Bright => detector_for(rest, params, false),
+        Polarity::Dark => detector_for(rest, params, true),
+        Polarity::Auto => {
+            let bright = detector_for(rest, params, false);
+            let dark = detector_for(rest, params, true);
+            let lattice = |d: &Result<Detector, MarkerError>| {
+                d.as_ref().map_or(0, |d| {
+                    crate::area::lattice_members(&detect(rest, d).typical_positions()).len()
+                })
+            };
+            // Bright wins ties: a TacTip's dark gaps between pins are no
+            // lattice of their own, but a dark count must beat it clearly.
+            if lattice(&dark) > 2 * lattice(&bright) {
+                dark
+            } else {
+                bright
+            }
+        }
+    }
+}
+
+fn detector_for(
+    rest: &GreyFrame,
+    params: &MarkerParams,
+    dark: bool,
+) -> Result<Detector, MarkerError> {
+    let inverted;
+    let rest = if dark {
+        inverted = rest.inverted();
+        &inverted
+    } else {
+        rest
+    };
     let (w, h) = (rest.width(), rest.height());
     if w < 16 || h < 16 {
         return Err(MarkerError::TooSmall {
@@ -620,6 +673,7 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
         cell_px: ((CELL_RADII * radius_px) / bin as f64).round().max(4.0) as usize,
         window_px: None,
         area: None,
+        dark: false,
     };
     let all = detect(rest, &det);
     let strengths: Vec<f32> = all.list.iter().map(|m| m.rel_strength).collect();
@@ -639,6 +693,7 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
         .collect();
     det.min_level_ratio = (LEVEL_FRACTION * percentile(kept, 0.05))
         .clamp(MIN_LEVEL_RATIO_RANGE.0, MIN_LEVEL_RATIO_RANGE.1);
+    det.dark = dark;
     Ok(det)
 }
 
@@ -800,13 +855,9 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// the darkest pixel of the window's outline, the peak the brightest of the
 /// 3x3 around the guess, the weights `max(0, v - (bg + peak) / 2)`. `None`
 /// when the contrast is below `min_contrast` or the centroid runs away.
-fn refine(frame: &GreyFrame, guess: PointPx, radius_px: f64, min_contrast: f32) -> Option<PointPx> {
-    refine_with_contrast(frame, guess, radius_px, min_contrast).map(|(p, ..)| p)
-}
-
-/// [`refine`], also returning the blob's contrast (grey levels) and its
-/// effective area above half maximum (px^2).
-fn refine_with_contrast(
+/// Also returns the blob's contrast (grey levels) and its effective
+/// area above half maximum (px^2).
+fn refine(
     frame: &GreyFrame,
     guess: PointPx,
     radius_px: f64,
@@ -955,6 +1006,7 @@ mod tests {
                 cell_px: 8,
                 window_px: None,
                 area: None,
+                dark: false,
             };
             assert!(detect(&frame, &det).is_empty());
             assert!(matches!(

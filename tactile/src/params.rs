@@ -152,6 +152,9 @@ pub struct MarkerParams {
     pub strength_ratio: f32,
     /// Minimum marker contrast over the local background, grey levels.
     pub min_contrast: f32,
+    /// Bright markers (TacTip pins), dark ones (GelSight-type dots), or
+    /// `auto`: decided on the rest frame.
+    pub polarity: Polarity,
     /// Follow the rest markers in small windows and search the whole frame
     /// only when that loses markers (see `markers::follow`).
     pub follow: bool,
@@ -165,8 +168,22 @@ impl Default for MarkerParams {
             strength_ratio: 0.3,
             min_contrast: 6.0,
             follow: true,
+            polarity: Polarity::Auto,
         }
     }
+}
+
+/// Marker polarity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Polarity {
+    /// Decided on the rest frame: the polarity whose markers form the
+    /// larger lattice (bright unless dark is clearly larger).
+    Auto,
+    /// Bright markers on a dark skin.
+    Bright,
+    /// Dark markers on a bright skin.
+    Dark,
 }
 
 /// Which density implementation the pipeline runs.

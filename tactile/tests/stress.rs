@@ -262,6 +262,7 @@ proptest! {
             cell_px: 8,
             window_px: None,
             area: None,
+            dark: false,
         };
         for m in markers::detect(&p.grey, &det).list {
             prop_assert!(m.pos.is_finite());
