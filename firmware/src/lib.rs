@@ -13,7 +13,10 @@
 //!   [`Clock`]), so the same code runs on the board, in QEMU and in the host
 //!   simulator.
 //! - [`sensor`]: ADC samples -> pascal, ratiometric to the measured sensor
-//!   supply, with a zero offset and oversampling.
+//!   supply, with oversampling.
+//! - [`calibration`]: the sensors' offset and gain (applied to the filtered
+//!   readings before every check), with the boot zero; the flash record
+//!   that keeps them ([`CalibrationStore`]).
 //! - [`queue`]: transmit queues by priority ([`TxQueues`], [`FrameSink`]).
 //! - [`persist`]: the record of the last trip / panic / fault that survives a reset.
 //! - [`led`]: the status LED's blink codes.
@@ -72,6 +75,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod calibration;
 pub mod control;
 pub mod cost_scenario;
 pub mod led;
@@ -81,6 +85,7 @@ pub mod reset;
 pub mod sensor;
 pub mod tank_model;
 
+pub use calibration::CalibrationStore;
 pub use control::hw::{Clock, PressureSource, Pumps, SensorError, Valves};
 pub use control::{Config, Controller, LinkStats, PumpOutputs, TickReport};
 pub use queue::{ByteQueue, FrameSink, Priority, QueueFull, TxQueues};

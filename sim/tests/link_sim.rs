@@ -230,6 +230,7 @@ fn another_protocol_version_is_a_clear_error() {
                     latched_faults: Default::default(),
                     last_stop: Default::default(),
                     min_telemetry_interval_ms: 8,
+                    calibration: Default::default(),
                 });
                 device
                     .write_all(&EncodedFrame::new(0, &reply).expect("fits"))
