@@ -438,19 +438,18 @@ pub fn run() -> ! {
         sensors,
         clock: SysTickClock,
     };
-    let controller = Controller::new(Config::default(), cause).with_last_stop(last_stop);
+    let mut controller = Controller::new(Config::default(), cause).with_last_stop(last_stop);
     #[cfg(not(feature = "qemu"))]
-    let (mut controller, mut calibration_store) = {
+    let mut calibration_store = {
         let mut store = flash_store::FlashStore::new(flash);
-        let controller = store.with_page(|page| controller.with_calibration_record(page));
-        (controller, store)
+        store.with_page(|page| controller.load_calibration_record(page));
+        store
     };
     // QEMU: no flash store (QEMU 7.2 does not model the F1's flash
     // programming); a calibration from the host lasts until reset.
     #[cfg(feature = "qemu")]
-    let (mut controller, mut calibration_store) =
-        (controller, dexitac_firmware::calibration::NoStore);
-    defmt::info!("calibration: {}", controller.calibration_report());
+    let mut calibration_store = dexitac_firmware::calibration::NoStore;
+    log_calibration(&controller);
     if !hse_ok {
         controller.report_fault(Fault::ClockFallback);
     }
@@ -469,6 +468,11 @@ pub fn run() -> ! {
         },
         &mut calibration_store,
     )
+}
+
+/// Logs the calibration in use at boot.
+fn log_calibration(controller: &Controller) {
+    defmt::info!("calibration: {}", controller.calibration_report());
 }
 
 /// The host link as the control loop sees it.

@@ -328,13 +328,23 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
     );
 
     // No flash store in the QEMU build: identity calibration, nothing
-    // persisted; the boot zero (tanks at atmosphere) applies.
+    // persisted; the boot zero (tanks at atmosphere) applies once taken,
+    // 32 ms of firmware time after boot (the first hello may come sooner).
     let cal = hello.calibration;
     assert_eq!(cal.calibration, Calibration::IDENTITY);
     assert_eq!(cal.source, CalibrationSource::Default);
     assert_eq!(cal.record, CalibrationRecord::NotPersisted);
-    assert_eq!(cal.positive_zero.source, ZeroSource::Boot);
-    assert_eq!(cal.negative_zero.source, ZeroSource::Boot);
+    let until = Instant::now() + Duration::from_secs(3);
+    let cal = loop {
+        let cal = host.hello().calibration;
+        if cal.positive_zero.source != ZeroSource::Pending {
+            break cal;
+        }
+        assert!(Instant::now() < until, "no boot zero within 3 s: {cal:?}");
+        thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(cal.positive_zero.source, ZeroSource::Boot, "{cal:?}");
+    assert_eq!(cal.negative_zero.source, ZeroSource::Boot, "{cal:?}");
 
     host.ack(HostMsg::Ping { nonce: 0xD3C1 });
 

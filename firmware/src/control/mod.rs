@@ -392,7 +392,10 @@ impl Controller {
     /// A disarmed controller in the safe state. `reset_cause` is reported
     /// in the hello reply.
     pub fn new(config: Config, reset_cause: ResetCause) -> Self {
-        let mut controller = Controller {
+        // Built in place (no local to move out: the controller is large).
+        // The identity calibration and the pending zero need no correction,
+        // which is what `TankChannel::new` starts with.
+        Controller {
             config,
             reset_cause,
             last_stop: LastStop::None,
@@ -425,9 +428,7 @@ impl Controller {
             loop_overruns: 0,
             tx_seq: 0,
             link: LinkStats::default(),
-        };
-        controller.apply_calibration();
-        controller
+        }
     }
 
     /// The same controller, reporting `last_stop` (read from the record
@@ -437,10 +438,17 @@ impl Controller {
         self
     }
 
-    /// The same controller, with the calibration stored in `page` (the
-    /// flash page of the record, [`calibration::decode`]) if it holds a
-    /// valid record, else the identity; the hello reply reports which.
+    /// The same controller, with the calibration stored in `page`
+    /// ([`Controller::load_calibration_record`]).
     pub fn with_calibration_record(mut self, page: &[u8]) -> Self {
+        self.load_calibration_record(page);
+        self
+    }
+
+    /// Applies the calibration stored in `page` (the flash page of the
+    /// record, [`calibration::decode`]) if it holds a valid record, else
+    /// the identity; the hello reply reports which. Called once at boot.
+    pub fn load_calibration_record(&mut self, page: &[u8]) {
         let loaded = calibration::decode(page);
         self.calibration_record = loaded.record;
         match loaded.calibration {
@@ -454,7 +462,6 @@ impl Controller {
             }
         }
         self.apply_calibration();
-        self
     }
 
     /// Latches `fault` at the next tick (a condition found outside the
