@@ -363,6 +363,23 @@ pub enum CalibrationRecord {
     WriteFailed,
 }
 
+impl CalibrationRecord {
+    /// Whether nothing went wrong with the record: not one that was ignored
+    /// (bad CRC, unknown version, not a record, implausible values) or
+    /// whose write failed. An empty page, a pending write and a build
+    /// without a store are sound.
+    pub const fn is_sound(self) -> bool {
+        !matches!(
+            self,
+            CalibrationRecord::BadCrc
+                | CalibrationRecord::UnknownVersion { .. }
+                | CalibrationRecord::NotARecord
+                | CalibrationRecord::Implausible { .. }
+                | CalibrationRecord::WriteFailed
+        )
+    }
+}
+
 /// Where the zero subtracted from a sensor's reading came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -866,6 +883,19 @@ mod tests {
                 gain_ppm: 1_100_001
             })
         );
+    }
+
+    #[test]
+    fn only_ignored_or_failed_records_are_unsound() {
+        assert!(CalibrationRecord::Empty.is_sound());
+        assert!(CalibrationRecord::NotPersisted.is_sound());
+        assert!(CalibrationRecord::WritePending.is_sound());
+        assert!(CalibrationRecord::Valid { version: 1 }.is_sound());
+        assert!(!CalibrationRecord::BadCrc.is_sound());
+        assert!(!CalibrationRecord::UnknownVersion { version: 2 }.is_sound());
+        assert!(!CalibrationRecord::NotARecord.is_sound());
+        assert!(!CalibrationRecord::Implausible { version: 1 }.is_sound());
+        assert!(!CalibrationRecord::WriteFailed.is_sound());
     }
 
     #[test]

@@ -187,18 +187,6 @@ fn record_words(record: CalibrationRecord) -> String {
     }
 }
 
-/// Whether the record is as it should be (nothing ignored, nothing failed).
-fn record_sound(record: CalibrationRecord) -> bool {
-    !matches!(
-        record,
-        CalibrationRecord::BadCrc
-            | CalibrationRecord::UnknownVersion { .. }
-            | CalibrationRecord::NotARecord
-            | CalibrationRecord::Implausible { .. }
-            | CalibrationRecord::WriteFailed
-    )
-}
-
 fn zero_words(zero: ActiveZero) -> String {
     let kpa = f64::from(zero.zero_pa) / 1e3;
     match zero.source {
@@ -339,7 +327,7 @@ impl CalibrateArgs {
         let before = hello.calibration;
         print_report(&before);
         if self.show || (self.offset_kpa.is_none() && self.gain.is_none() && !self.zero) {
-            return Ok(Outcome::from_ok(record_sound(before.record)));
+            return Ok(Outcome::from_ok(before.record.is_sound()));
         }
 
         let mut wanted = before.calibration;
@@ -439,17 +427,5 @@ mod tests {
             e.contains("positive sensor offset +12.000 kPa is outside ±10 kPa"),
             "{e}"
         );
-    }
-
-    #[test]
-    fn only_ignored_or_failed_records_are_unsound() {
-        assert!(record_sound(CalibrationRecord::Empty));
-        assert!(record_sound(CalibrationRecord::NotPersisted));
-        assert!(record_sound(CalibrationRecord::Valid { version: 1 }));
-        assert!(!record_sound(CalibrationRecord::BadCrc));
-        assert!(!record_sound(CalibrationRecord::UnknownVersion {
-            version: 2
-        }));
-        assert!(!record_sound(CalibrationRecord::WriteFailed));
     }
 }
