@@ -12,8 +12,8 @@ use std::process::ExitCode;
 use clap::{CommandFactory, Parser, Subcommand};
 
 use commands::{
-    analyze, bench_pipeline, cameras, completions, faults, fit_actuator, record, replay, run,
-    sensor, sim, synth_frames, view, workspace,
+    analyze, bench_pipeline, calibrate, cameras, completions, faults, fit_actuator, record, replay,
+    run, sensor, sim, synth_frames, view, workspace,
 };
 use exit::Outcome;
 
@@ -43,6 +43,14 @@ enum Command {
     /// and a person's acknowledgement: `--clear FAULT,...` once the cause is
     /// removed. Exit 1 while faults stay latched.
     Faults(faults::FaultsArgs),
+    /// The tank pressure sensors' calibration on the board (zero offset and
+    /// gain per sensor): `--show` it, set it (`--offset-kpa POS,NEG`,
+    /// `--gain POS,NEG`, or `--zero` from the readings with the tanks open
+    /// to atmosphere), stored in the board's flash and read back. Only
+    /// while the board is disarmed; offsets within ±10 kPa, gains within
+    /// 0.9..1.1. Exit 1 when it was applied but not stored, or `--show`
+    /// finds the stored record ignored (bad CRC, unknown version).
+    Calibrate(calibrate::CalibrateArgs),
     /// Tactile pipeline on image files: contact centre per frame to a CSV.
     ///
     /// Writes `frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms`
@@ -92,6 +100,7 @@ impl Command {
             Command::Sim(_) => "sim",
             Command::Run(_) => "run",
             Command::Faults(_) => "faults",
+            Command::Calibrate(_) => "calibrate",
             Command::Analyze(_) => "analyze",
             Command::BenchPipeline(_) => "bench-pipeline",
             Command::SynthFrames(_) => "synth-frames",
@@ -112,6 +121,7 @@ impl Command {
             Command::Sim(args) => args.run(),
             Command::Run(args) => args.run(),
             Command::Faults(args) => args.run(),
+            Command::Calibrate(args) => args.run(),
             Command::Analyze(args) => args.run(),
             Command::BenchPipeline(args) => args.run(),
             Command::SynthFrames(args) => args.run(),

@@ -41,13 +41,20 @@
 //!    a person to acknowledge it).
 //! 3. The record of what stopped the outputs before this boot is read from
 //!    no-init RAM ([`dexitac_firmware::persist`]) for the hello reply.
+//! 4. The sensor calibration is read from the last flash page
+//!    ([`dexitac_firmware::calibration`], `flash_store`); a missing or bad
+//!    record leaves the identity calibration, and the hello reply says why.
+//!    The QEMU build reads no flash and keeps a calibration set by the host
+//!    only until reset.
 //!
 //! # Control loop
 //!
 //! The USART1 receive interrupt moves each byte into a `heapless::spsc`
 //! queue: the interrupt owns the producer, the loop the consumer, no lock.
 //! The main loop, on every new millisecond: hands the received bytes to
-//! [`Controller::receive`], runs [`Controller::tick`], records a new trip in
+//! [`Controller::receive`], writes a calibration the host set to flash if
+//! one waits ([`Controller::store_calibration`]: only disarmed, pumps off;
+//! the watchdog is fed first), runs [`Controller::tick`], records a new trip in
 //! no-init RAM, sets the status LED ([`dexitac_firmware::led`]), feeds the
 //! independent watchdog (only here: a stalled loop resets the MCU within
 //! [`WATCHDOG_TIMEOUT_MS`]); in between it moves queued bytes into the USART
@@ -65,6 +72,7 @@ use core::sync::atomic::{AtomicU32, Ordering};
 use cortex_m::peripheral::syst::SystClkSource;
 use cortex_m_rt::{exception, ExceptionFrame};
 use defmt_rtt as _;
+use dexitac_firmware::calibration::CalibrationStore;
 use dexitac_firmware::control::valves::ValveLevels;
 use dexitac_firmware::led::led_on;
 use dexitac_firmware::persist::{self, RECORD_WORDS};
@@ -92,6 +100,8 @@ mod model_sensors;
 use model_sensors as sensors;
 #[cfg(feature = "qemu-cost")]
 mod cost;
+#[cfg(not(feature = "qemu"))]
+mod flash_store;
 
 /// Baud rate of the host link (USART1).
 pub const BAUD_RATE: u32 = 115_200;
@@ -429,6 +439,17 @@ pub fn run() -> ! {
         clock: SysTickClock,
     };
     let mut controller = Controller::new(Config::default(), cause).with_last_stop(last_stop);
+    #[cfg(not(feature = "qemu"))]
+    let mut calibration_store = {
+        let mut store = flash_store::FlashStore::new(flash);
+        store.with_page(|page| controller.load_calibration_record(page));
+        store
+    };
+    // QEMU: no flash store (QEMU 7.2 does not model the F1's flash
+    // programming); a calibration from the host lasts until reset.
+    #[cfg(feature = "qemu")]
+    let mut calibration_store = dexitac_firmware::calibration::NoStore;
+    log_calibration(&controller);
     if !hse_ok {
         controller.report_fault(Fault::ClockFallback);
     }
@@ -445,7 +466,13 @@ pub fn run() -> ! {
             watchdog: &mut watchdog,
             led,
         },
+        &mut calibration_store,
     )
+}
+
+/// Logs the calibration in use at boot.
+fn log_calibration(controller: &Controller) {
+    defmt::info!("calibration: {}", controller.calibration_report());
 }
 
 /// The host link as the control loop sees it.
@@ -467,6 +494,7 @@ fn control_loop<S: sensors::TankSensors>(
     io: &mut Io<S>,
     link: Link<'_>,
     mut watch: Watch<'_>,
+    calibration_store: &mut impl CalibrationStore,
 ) -> ! {
     let Link {
         tx_queue,
@@ -502,6 +530,13 @@ fn control_loop<S: sensors::TankSensors>(
         #[cfg(feature = "qemu-cost")]
         meter.script(now_ms, controller, io, tx_queue);
         controller.receive(rx_chunk.get(..n).unwrap_or(&[]), io, tx_queue);
+        if controller.calibration_write_pending() {
+            // A page erase stalls the CPU for up to 40 ms.
+            watch.watchdog.feed();
+            if let Some(record) = controller.store_calibration(calibration_store) {
+                defmt::info!("calibration record: {}", record);
+            }
+        }
         let report = controller.tick(io, tx_queue);
         #[cfg(feature = "qemu-cost")]
         meter.record(start);

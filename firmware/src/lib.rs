@@ -13,7 +13,10 @@
 //!   [`Clock`]), so the same code runs on the board, in QEMU and in the host
 //!   simulator.
 //! - [`sensor`]: ADC samples -> pascal, ratiometric to the measured sensor
-//!   supply, with a zero offset and oversampling.
+//!   supply, with oversampling.
+//! - [`calibration`]: the sensors' offset and gain (applied to the filtered
+//!   readings before every check), with the boot zero; the flash record
+//!   that keeps them ([`CalibrationStore`]).
 //! - [`queue`]: transmit queues by priority ([`TxQueues`], [`FrameSink`]).
 //! - [`persist`]: the record of the last trip / panic / fault that survives a reset.
 //! - [`led`]: the status LED's blink codes.
@@ -56,7 +59,8 @@
 //! | clock fallback | crystal not ready within about 30 ms at boot (board) | latched at the first tick; runs on the internal clock | `ClearFaults` |
 //! | frame corrupted (COBS, CRC, length, version) | decoder error | frame dropped, nothing actuated, counted | automatic (next frame) |
 //! | frame malformed / unknown message (CRC ok) | decoder error | [`NackReason::Malformed`](dexitac_protocol::NackReason::Malformed) / `UnknownMessage`, nothing actuated | automatic |
-//! | command not allowed | dispatch | `Nack` (`NotArmed`, `Tripped`, `Refused`, `GuardBand`, `IntervalTooShort`), nothing actuated | as the reason says |
+//! | command not allowed | dispatch | `Nack` (`NotArmed`, `Tripped`, `Refused`, `GuardBand`, `IntervalTooShort`, `Implausible`), nothing actuated or applied | as the reason says |
+//! | calibration record unusable (erased, bad CRC, unknown version, implausible values) | at boot ([`calibration::decode`]) | identity calibration with the boot zero; reported in the hello reply | a new `SetCalibration` |
 //! | transmit queue full | [`FrameSink::send`] fails | telemetry dropped first (own queue); counted in [`LinkStats`] | automatic |
 //! | control loop late | tick later than [`Config::tick_period_ms`] | counted (`loop_overruns` in telemetry) | none needed |
 //! | control loop stalled | independent watchdog not fed for 50 ms (board) | MCU reset -> safe state, `ResetCause::IndependentWatchdog` in the hello reply | host re-arms |
@@ -72,6 +76,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod calibration;
 pub mod control;
 pub mod cost_scenario;
 pub mod led;
@@ -81,6 +86,7 @@ pub mod reset;
 pub mod sensor;
 pub mod tank_model;
 
+pub use calibration::CalibrationStore;
 pub use control::hw::{Clock, PressureSource, Pumps, SensorError, Valves};
 pub use control::{Config, Controller, LinkStats, PumpOutputs, TickReport};
 pub use queue::{ByteQueue, FrameSink, Priority, QueueFull, TxQueues};

@@ -20,7 +20,7 @@ use core::fmt;
 use crc::{Crc, CRC_32_ISCSI};
 use postcard::experimental::max_size::MaxSize;
 
-use crate::message::{HostMsg, McuMsg, Message};
+use crate::message::{HostMsg, McuMsg, Message, Telemetry};
 use crate::PROTOCOL_VERSION;
 
 const CRC32C: Crc<u32> = Crc::<u32>::new(&CRC_32_ISCSI);
@@ -46,6 +46,17 @@ pub const MAX_RAW_LEN: usize = HEADER_LEN + MAX_MESSAGE_LEN + CRC_LEN;
 pub const MAX_ENCODED_LEN: usize = cobs::max_encoding_length(MAX_RAW_LEN);
 /// Largest frame on the wire, 0x00 delimiter included.
 pub const MAX_FRAME_LEN: usize = MAX_ENCODED_LEN + 1;
+
+/// Largest wire frame (COBS and 0x00 delimiter included) of a message whose
+/// postcard encoding takes at most `message_len` bytes.
+pub const fn max_frame_len_for(message_len: usize) -> usize {
+    cobs::max_encoding_length(HEADER_LEN + message_len + CRC_LEN) + 1
+}
+
+/// Largest telemetry frame on the wire: [`McuMsg::Telemetry`]'s tag byte and
+/// body. Telemetry is the only periodic frame, so the line time of this
+/// frame sets the shortest telemetry interval the firmware accepts.
+pub const MAX_TELEMETRY_FRAME_LEN: usize = max_frame_len_for(1 + Telemetry::POSTCARD_MAX_SIZE);
 
 /// A decoded frame: its sequence number and message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -408,9 +419,18 @@ mod tests {
     #[test]
     fn max_frame_len_bounds_every_message() {
         assert_eq!(MAX_FRAME_LEN, MAX_ENCODED_LEN + 1);
-        // Telemetry is the longest message: 35 bytes of postcard at most.
-        assert_eq!(MAX_MESSAGE_LEN, 35);
-        assert_eq!(MAX_FRAME_LEN, 44, "stated in the crate docs");
+        assert_eq!(max_frame_len_for(MAX_MESSAGE_LEN), MAX_FRAME_LEN);
+        // The hello reply is the longest message: 66 bytes of postcard at most
+        // (37 of them the calibration report).
+        assert_eq!(
+            McuMsg::POSTCARD_MAX_SIZE,
+            1 + crate::HelloReply::POSTCARD_MAX_SIZE
+        );
+        assert_eq!(crate::CalibrationReport::POSTCARD_MAX_SIZE, 37);
+        assert_eq!(MAX_MESSAGE_LEN, 66);
+        assert_eq!(MAX_FRAME_LEN, 75, "stated in the crate docs");
+        // Telemetry: 35 bytes of postcard at most, 44 on the wire.
+        assert_eq!(MAX_TELEMETRY_FRAME_LEN, 44, "stated in the crate docs");
     }
 
     #[test]

@@ -29,7 +29,9 @@
 //! 4 CRC bytes, 1 COBS byte and the 0x00 delimiter, i.e. 9 bytes of overhead
 //! (the test `set_chambers_frame_is_18_bytes` pins these numbers). At
 //! 115 200 baud (10 bits a byte) that frame takes 1.56 ms on the line. No frame
-//! is longer than [`MAX_FRAME_LEN`] = 44 bytes (a full telemetry frame).
+//! is longer than [`MAX_FRAME_LEN`] = 75 bytes (a full hello reply, which
+//! carries the sensor calibration); a telemetry frame takes at most
+//! [`MAX_TELEMETRY_FRAME_LEN`] = 44 bytes.
 //!
 //! # Example
 //!
@@ -60,15 +62,22 @@ pub mod message;
 pub use decoder::Decoder;
 pub use frame::{
     decode_in_place, encode_into, BufferTooSmall, EncodedFrame, Frame, FrameError, MAX_ENCODED_LEN,
-    MAX_FRAME_LEN,
+    MAX_FRAME_LEN, MAX_TELEMETRY_FRAME_LEN,
 };
-pub use limits::{CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
+pub use limits::{
+    CALIBRATION_GAIN_MAX_PPM, CALIBRATION_GAIN_MIN_PPM, CALIBRATION_OFFSET_MAX_PA, CHAMBER_COUNT,
+    GAIN_UNITY_PPM, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
+};
 pub use message::{
-    ArmState, Chambers, Fault, FaultEvent, FaultFlags, FirmwareVersion, HelloReply, HostMsg,
-    LastStop, LimitError, McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets,
-    Telemetry, ValveState, NO_READING_PA,
+    ActiveZero, ArmState, Calibration, CalibrationError, CalibrationRecord, CalibrationReport,
+    CalibrationSource, Chambers, Fault, FaultEvent, FaultFlags, FirmwareVersion, HelloReply,
+    HostMsg, LastStop, LimitError, McuMsg, Message, NackReason, PumpMode, ResetCause,
+    SensorCalibration, TankTargets, Telemetry, ValveState, ZeroSource, NO_READING_PA,
 };
 
 /// Version of this wire protocol. Bump it when any message's layout changes;
 /// each side refuses frames of another version ([`FrameError::WrongVersion`]).
-pub const PROTOCOL_VERSION: u8 = 2;
+///
+/// Version 3: [`HostMsg::SetCalibration`], [`NackReason::Implausible`] and
+/// [`HelloReply::calibration`].
+pub const PROTOCOL_VERSION: u8 = 3;

@@ -20,3 +20,26 @@ pub const POSITIVE_TANK_MAX_KPA: i32 = POSITIVE_TANK_MAX_PA / 1000;
 
 /// [`NEGATIVE_TANK_MIN_PA`] in kilopascal.
 pub const NEGATIVE_TANK_MIN_KPA: i32 = NEGATIVE_TANK_MIN_PA / 1000;
+
+/// A calibration gain of exactly 1, in parts per million.
+pub const GAIN_UNITY_PPM: u32 = 1_000_000;
+
+/// Largest zero offset a sensor calibration may carry, either sign, in
+/// pascal (±10 kPa): 2.5 % of the tank sensors' 400 kPa span, the whole
+/// error band of a typical -100..300 kPa part and 2.5 times the 4 kPa the
+/// firmware's boot zero accepts. A larger offset is a broken sensor or a
+/// zero taken on a pressurised tank, not something to calibrate out.
+pub const CALIBRATION_OFFSET_MAX_PA: i32 = 10_000;
+
+/// Smallest calibration gain, in parts per million (0.9).
+///
+/// The span errors of the parts (sensor, 1 % divider resistors) stay under
+/// 5 %; 0.9..1.1 leaves twice that. The bound also limits what a *wrong*
+/// calibration can do to the trip point: on a sensor that reads true, a
+/// gain `g` and offset `o` trip the positive tank at a true
+/// `50 kPa / g + o`, at worst 65.6 kPa (gain 0.9, offset +10 kPa).
+pub const CALIBRATION_GAIN_MIN_PPM: u32 = 900_000;
+
+/// Largest calibration gain, in parts per million (1.1); see
+/// [`CALIBRATION_GAIN_MIN_PPM`].
+pub const CALIBRATION_GAIN_MAX_PPM: u32 = 1_100_000;

@@ -15,7 +15,10 @@ use core::fmt;
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
-use crate::limits::{CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA};
+use crate::limits::{
+    CALIBRATION_GAIN_MAX_PPM, CALIBRATION_GAIN_MIN_PPM, CALIBRATION_OFFSET_MAX_PA, CHAMBER_COUNT,
+    GAIN_UNITY_PPM, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
+};
 
 /// What one chamber's valve pair does. A chamber has one inlet (from the
 /// positive tank) and one outlet (into the negative tank); this type has no
@@ -161,6 +164,263 @@ impl TryFrom<RawTankTargets> for TankTargets {
     }
 }
 
+/// The calibration of one tank pressure sensor. The firmware reports (and
+/// checks against the limits)
+///
+/// ```text
+/// calibrated = (reading - zero) * gain_ppm / 1 000 000
+/// ```
+///
+/// where `reading` is the sensor's filtered reading through its nominal
+/// transfer function and `zero` is the boot zero or `offset_pa`
+/// ([`ActiveZero`], which applies when is in the firmware's README).
+/// Integers only: no floats on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SensorCalibration {
+    /// The sensor's reading of atmosphere (its zero error), in pascal:
+    /// subtracted from every reading unless the boot zero replaces it.
+    pub offset_pa: i32,
+    /// Gain applied after the zero, in parts per million
+    /// ([`GAIN_UNITY_PPM`] = 1.0).
+    pub gain_ppm: u32,
+}
+
+impl SensorCalibration {
+    /// No correction: offset 0, gain 1.
+    pub const IDENTITY: SensorCalibration = SensorCalibration {
+        offset_pa: 0,
+        gain_ppm: GAIN_UNITY_PPM,
+    };
+
+    /// Whether the offset lies within ±[`CALIBRATION_OFFSET_MAX_PA`].
+    pub const fn offset_plausible(self) -> bool {
+        self.offset_pa >= -CALIBRATION_OFFSET_MAX_PA && self.offset_pa <= CALIBRATION_OFFSET_MAX_PA
+    }
+
+    /// Whether the gain lies in
+    /// [`CALIBRATION_GAIN_MIN_PPM`]..=[`CALIBRATION_GAIN_MAX_PPM`].
+    pub const fn gain_plausible(self) -> bool {
+        self.gain_ppm >= CALIBRATION_GAIN_MIN_PPM && self.gain_ppm <= CALIBRATION_GAIN_MAX_PPM
+    }
+}
+
+impl Default for SensorCalibration {
+    fn default() -> Self {
+        SensorCalibration::IDENTITY
+    }
+}
+
+/// The calibration of both tank sensors ([`HostMsg::SetCalibration`],
+/// [`CalibrationReport`]). Any value decodes; the firmware refuses one
+/// that fails [`Calibration::check`] with [`NackReason::Implausible`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Calibration {
+    /// The positive tank's sensor.
+    pub positive: SensorCalibration,
+    /// The negative tank's sensor.
+    pub negative: SensorCalibration,
+}
+
+impl Calibration {
+    /// No correction on either sensor.
+    pub const IDENTITY: Calibration = Calibration {
+        positive: SensorCalibration::IDENTITY,
+        negative: SensorCalibration::IDENTITY,
+    };
+
+    /// Whether every offset and gain lies within the plausible range
+    /// ([`crate::limits::CALIBRATION_OFFSET_MAX_PA`],
+    /// [`crate::limits::CALIBRATION_GAIN_MIN_PPM`]..=[`crate::limits::CALIBRATION_GAIN_MAX_PPM`]);
+    /// the first value outside it otherwise.
+    pub const fn check(&self) -> Result<(), CalibrationError> {
+        if !self.positive.offset_plausible() {
+            return Err(CalibrationError::PositiveOffset {
+                offset_pa: self.positive.offset_pa,
+            });
+        }
+        if !self.positive.gain_plausible() {
+            return Err(CalibrationError::PositiveGain {
+                gain_ppm: self.positive.gain_ppm,
+            });
+        }
+        if !self.negative.offset_plausible() {
+            return Err(CalibrationError::NegativeOffset {
+                offset_pa: self.negative.offset_pa,
+            });
+        }
+        if !self.negative.gain_plausible() {
+            return Err(CalibrationError::NegativeGain {
+                gain_ppm: self.negative.gain_ppm,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// A calibration value outside the plausible range ([`Calibration::check`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationError {
+    /// The positive sensor's offset lies beyond ±10 kPa.
+    PositiveOffset {
+        /// The rejected offset, in pascal.
+        offset_pa: i32,
+    },
+    /// The positive sensor's gain lies outside 0.9..1.1.
+    PositiveGain {
+        /// The rejected gain, in parts per million.
+        gain_ppm: u32,
+    },
+    /// The negative sensor's offset lies beyond ±10 kPa.
+    NegativeOffset {
+        /// The rejected offset, in pascal.
+        offset_pa: i32,
+    },
+    /// The negative sensor's gain lies outside 0.9..1.1.
+    NegativeGain {
+        /// The rejected gain, in parts per million.
+        gain_ppm: u32,
+    },
+}
+
+impl fmt::Display for CalibrationError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let offset = |f: &mut fmt::Formatter<'_>, tank: &str, offset_pa: i32| {
+            write!(
+                f,
+                "{tank} sensor offset {offset_pa} Pa is outside ±{CALIBRATION_OFFSET_MAX_PA} Pa"
+            )
+        };
+        let gain = |f: &mut fmt::Formatter<'_>, tank: &str, gain_ppm: u32| {
+            write!(
+                f,
+                "{tank} sensor gain {gain_ppm} ppm is outside \
+                 {CALIBRATION_GAIN_MIN_PPM}..={CALIBRATION_GAIN_MAX_PPM} ppm"
+            )
+        };
+        match *self {
+            CalibrationError::PositiveOffset { offset_pa } => offset(f, "positive", offset_pa),
+            CalibrationError::PositiveGain { gain_ppm } => gain(f, "positive", gain_ppm),
+            CalibrationError::NegativeOffset { offset_pa } => offset(f, "negative", offset_pa),
+            CalibrationError::NegativeGain { gain_ppm } => gain(f, "negative", gain_ppm),
+        }
+    }
+}
+
+#[cfg(feature = "std")]
+impl std::error::Error for CalibrationError {}
+
+/// Where the calibration in use came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationSource {
+    /// No usable record at boot: [`Calibration::IDENTITY`].
+    #[default]
+    Default,
+    /// The record read from flash at boot.
+    Flash,
+    /// [`HostMsg::SetCalibration`] since boot ([`CalibrationReport::record`]
+    /// says whether it was stored).
+    Host,
+}
+
+/// The state of the calibration record in the MCU's flash.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationRecord {
+    /// This build keeps no record (the QEMU build): a calibration from the
+    /// host lasts until the next reset.
+    #[default]
+    NotPersisted,
+    /// The record's page is erased: no calibration was ever stored.
+    Empty,
+    /// A valid record of this version (read at boot or just written).
+    Valid {
+        /// The record format's version.
+        version: u16,
+    },
+    /// A record whose CRC does not match (torn write, worn flash): ignored.
+    BadCrc,
+    /// An intact record of a format this firmware does not know: ignored.
+    UnknownVersion {
+        /// The record's version.
+        version: u16,
+    },
+    /// The page holds something that is not a record: ignored.
+    NotARecord,
+    /// An intact record whose values fail [`Calibration::check`]: ignored.
+    Implausible {
+        /// The record's version.
+        version: u16,
+    },
+    /// A calibration from the host waits to be written (it is written as
+    /// soon as the MCU is disarmed with the pumps off; arming waits for it).
+    WritePending,
+    /// Writing the record failed (erase, program or verify error): the
+    /// calibration applies until reset, the page may hold anything.
+    WriteFailed,
+}
+
+impl CalibrationRecord {
+    /// Whether nothing went wrong with the record: not one that was ignored
+    /// (bad CRC, unknown version, not a record, implausible values) or
+    /// whose write failed. An empty page, a pending write and a build
+    /// without a store are sound.
+    pub const fn is_sound(self) -> bool {
+        !matches!(
+            self,
+            CalibrationRecord::BadCrc
+                | CalibrationRecord::UnknownVersion { .. }
+                | CalibrationRecord::NotARecord
+                | CalibrationRecord::Implausible { .. }
+                | CalibrationRecord::WriteFailed
+        )
+    }
+}
+
+/// Where the zero subtracted from a sensor's reading came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ZeroSource {
+    /// The boot zero has not been taken yet: the calibration's offset applies.
+    #[default]
+    Pending,
+    /// The reading of atmosphere at boot (it lay within the firmware's
+    /// window around the calibration's offset).
+    Boot,
+    /// The calibration's offset (the boot reading lay outside the window,
+    /// e.g. a tank still under pressure after a reset, or was not valid).
+    Offset,
+}
+
+/// The zero a sensor's readings are corrected by now.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ActiveZero {
+    /// Subtracted from the reading before the gain, in pascal.
+    pub zero_pa: i32,
+    /// Where it came from.
+    pub source: ZeroSource,
+}
+
+/// The calibration the MCU applies, in its hello reply.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct CalibrationReport {
+    /// Offsets and gains in use.
+    pub calibration: Calibration,
+    /// Where they came from.
+    pub source: CalibrationSource,
+    /// The flash record (read at boot, or after the last write).
+    pub record: CalibrationRecord,
+    /// The zero the positive sensor's readings are corrected by.
+    pub positive_zero: ActiveZero,
+    /// The zero the negative sensor's readings are corrected by.
+    pub negative_zero: ActiveZero,
+}
+
 /// A command from the host (PC) to the MCU. Every command is answered with
 /// [`McuMsg::Ack`] or [`McuMsg::Nack`] carrying the command frame's sequence
 /// number, except [`HostMsg::Hello`], answered with [`McuMsg::HelloReply`].
@@ -217,6 +477,13 @@ pub enum HostMsg {
         /// The faults being acknowledged (a person named them).
         faults: FaultFlags,
     },
+    /// Set both sensors' calibration (offset and gain), applied at once and
+    /// stored in flash. Only while disarmed: refused with
+    /// [`NackReason::Refused`] while armed, [`NackReason::Tripped`] while
+    /// faults are latched, and [`NackReason::Implausible`] (nothing
+    /// applied) when [`Calibration::check`] fails. The hello reply shows
+    /// the result ([`HelloReply::calibration`]).
+    SetCalibration(Calibration),
 }
 
 /// Firmware version, semantic-versioning style.
@@ -275,6 +542,9 @@ pub struct HelloReply {
     /// The smallest telemetry interval the MCU accepts, in milliseconds
     /// (from the baud rate and the telemetry frame size).
     pub min_telemetry_interval_ms: u16,
+    /// The sensor calibration in use, where it came from and the state of
+    /// its flash record.
+    pub calibration: CalibrationReport,
 }
 
 /// What last forced the outputs safe before the current boot, as recorded
@@ -323,7 +593,7 @@ pub enum NackReason {
     Tripped,
     /// The command cannot run in the current state (e.g. arm while a fault
     /// condition is still present, vent onto a tank past its limit, clear a
-    /// fault whose condition is present).
+    /// fault whose condition is present, calibrate while armed).
     Refused,
     /// A tank target lies inside the limits but not the firmware's guard
     /// band (a margin inside each limit).
@@ -331,6 +601,9 @@ pub enum NackReason {
     /// A telemetry interval shorter than the line can carry
     /// ([`HelloReply::min_telemetry_interval_ms`]).
     IntervalTooShort,
+    /// A calibration outside the plausible range ([`Calibration::check`]):
+    /// nothing applied.
+    Implausible,
 }
 
 /// The MCU's safety state.
@@ -541,11 +814,103 @@ pub trait Message: Serialize + for<'de> Deserialize<'de> + MaxSize {
 }
 
 impl Message for HostMsg {
-    const VARIANT_COUNT: u8 = 12;
+    const VARIANT_COUNT: u8 = 13;
     const DIRECTION: u8 = b'H';
 }
 
 impl Message for McuMsg {
     const VARIANT_COUNT: u8 = 5;
     const DIRECTION: u8 = b'M';
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+    use std::string::ToString;
+
+    use super::*;
+
+    fn with_positive(offset_pa: i32, gain_ppm: u32) -> Calibration {
+        Calibration {
+            positive: SensorCalibration {
+                offset_pa,
+                gain_ppm,
+            },
+            negative: SensorCalibration::IDENTITY,
+        }
+    }
+
+    #[test]
+    fn calibration_limits_are_inclusive() {
+        assert_eq!(Calibration::IDENTITY.check(), Ok(()));
+        for (offset_pa, gain_ppm) in [
+            (CALIBRATION_OFFSET_MAX_PA, CALIBRATION_GAIN_MIN_PPM),
+            (-CALIBRATION_OFFSET_MAX_PA, CALIBRATION_GAIN_MAX_PPM),
+        ] {
+            assert_eq!(with_positive(offset_pa, gain_ppm).check(), Ok(()));
+        }
+        assert_eq!(
+            with_positive(CALIBRATION_OFFSET_MAX_PA + 1, GAIN_UNITY_PPM).check(),
+            Err(CalibrationError::PositiveOffset { offset_pa: 10_001 })
+        );
+        assert_eq!(
+            with_positive(0, CALIBRATION_GAIN_MIN_PPM - 1).check(),
+            Err(CalibrationError::PositiveGain { gain_ppm: 899_999 })
+        );
+        let negative = Calibration {
+            positive: SensorCalibration::IDENTITY,
+            negative: SensorCalibration {
+                offset_pa: i32::MIN,
+                gain_ppm: 0,
+            },
+        };
+        assert_eq!(
+            negative.check(),
+            Err(CalibrationError::NegativeOffset {
+                offset_pa: i32::MIN
+            })
+        );
+        let gain = Calibration {
+            negative: SensorCalibration {
+                offset_pa: 0,
+                gain_ppm: CALIBRATION_GAIN_MAX_PPM + 1,
+            },
+            ..negative
+        };
+        assert_eq!(
+            gain.check(),
+            Err(CalibrationError::NegativeGain {
+                gain_ppm: 1_100_001
+            })
+        );
+    }
+
+    #[test]
+    fn only_ignored_or_failed_records_are_unsound() {
+        assert!(CalibrationRecord::Empty.is_sound());
+        assert!(CalibrationRecord::NotPersisted.is_sound());
+        assert!(CalibrationRecord::WritePending.is_sound());
+        assert!(CalibrationRecord::Valid { version: 1 }.is_sound());
+        assert!(!CalibrationRecord::BadCrc.is_sound());
+        assert!(!CalibrationRecord::UnknownVersion { version: 2 }.is_sound());
+        assert!(!CalibrationRecord::NotARecord.is_sound());
+        assert!(!CalibrationRecord::Implausible { version: 1 }.is_sound());
+        assert!(!CalibrationRecord::WriteFailed.is_sound());
+    }
+
+    #[test]
+    fn calibration_errors_name_the_sensor_and_the_range() {
+        let e = CalibrationError::NegativeGain {
+            gain_ppm: 1_300_000,
+        };
+        assert_eq!(
+            e.to_string(),
+            "negative sensor gain 1300000 ppm is outside 900000..=1100000 ppm"
+        );
+        let e = CalibrationError::PositiveOffset { offset_pa: -12_000 };
+        assert_eq!(
+            e.to_string(),
+            "positive sensor offset -12000 Pa is outside ±10000 Pa"
+        );
+    }
 }

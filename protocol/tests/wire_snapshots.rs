@@ -5,6 +5,9 @@
 //! type, CRC or framing. That is a protocol break: bump
 //! `PROTOCOL_VERSION`, then update the snapshots deliberately.
 
+mod common;
+
+use common::{host_examples, mcu_examples};
 use dexitac_protocol::*;
 
 fn hex(bytes: &[u8]) -> String {
@@ -15,114 +18,56 @@ fn hex(bytes: &[u8]) -> String {
         .join(" ")
 }
 
-fn targets() -> TankTargets {
-    TankTargets::new(35_000, -40_000).expect("inside limits")
-}
-
-fn telemetry() -> Telemetry {
-    let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
-    chambers[1] = ValveState::Inflate;
-    chambers[6] = ValveState::Deflate;
-    Telemetry {
-        time_ms: 123_456,
-        positive_tank_pa: 35_012,
-        negative_tank_pa: -39_950,
-        chambers,
-        positive_pump_on: true,
-        negative_pump_on: false,
-        state: ArmState::Armed,
-        faults: FaultFlags::NONE.with(Fault::HostSilence),
-        loop_overruns: 3,
-    }
-}
-
-/// One instance of every HostMsg variant, in wire order, with its frame bytes (seq 0x0102).
+/// One instance of every HostMsg variant ([`host_examples`]), in wire order,
+/// with its frame bytes (seq 0x0102).
 fn host_snapshots() -> Vec<(HostMsg, &'static str)> {
-    let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
-    chambers[0] = ValveState::Inflate;
-    chambers[7] = ValveState::Deflate;
-    vec![
-        (HostMsg::Hello, "04 02 02 01 05 f1 fe ee 54 00"),
-        (
-            HostMsg::Ping { nonce: 0xdead_beef },
-            "0e 02 02 01 01 ef fd b6 f5 0d 76 91 16 b5 00",
-        ),
-        (
-            HostMsg::SetChambers { chambers },
-            "06 02 02 01 02 01 01 01 01 01 01 06 02 36 f8 56 f4 00",
-        ),
-        (HostMsg::SealAll, "09 02 02 01 03 05 0d be 47 00"),
-        (HostMsg::VentAll, "09 02 02 01 04 ee 69 74 93 00"),
-        (
-            HostMsg::SetPumps {
-                positive: PumpMode::Regulate,
-                negative: PumpMode::Off,
-            },
-            "06 02 02 01 05 01 05 74 eb 72 d1 00",
-        ),
-        (
-            HostMsg::SetTankTargets(targets()),
-            "0f 02 02 01 06 f0 a2 04 ff f0 04 3a 3c b1 0c 00",
-        ),
-        (HostMsg::Arm, "09 02 02 01 07 1a 9a 24 80 00"),
-        (HostMsg::Disarm, "09 02 02 01 08 3e a6 37 de 00"),
-        (
-            HostMsg::SetTelemetryInterval { interval_ms: 20 },
-            "0a 02 02 01 09 14 66 5a 5e 0a 00",
-        ),
-        (HostMsg::Heartbeat, "09 02 02 01 0a c9 d6 0c 3f 00"),
-        (
-            HostMsg::ClearFaults {
-                faults: FaultFlags::NONE.with(Fault::HostSilence),
-            },
-            "0a 02 02 01 0b 40 44 27 a4 bb 00",
-        ),
-    ]
+    let hex = [
+        // Hello
+        "04 03 02 01 05 49 54 ab 89 00",
+        // Ping
+        "0e 03 02 01 01 ef fd b6 f5 0d 3e 47 28 41 00",
+        // SetChambers
+        "06 03 02 01 02 01 01 01 01 01 01 06 02 06 2c 27 c5 00",
+        // SealAll
+        "09 03 02 01 03 bd a7 fb 9a 00",
+        // VentAll
+        "09 03 02 01 04 56 c3 31 4e 00",
+        // SetPumps
+        "06 03 02 01 05 01 05 6d 80 42 3e 00",
+        // SetTankTargets
+        "0f 03 02 01 06 f0 a2 04 ff f0 04 9f 47 e7 c7 00",
+        // Arm
+        "09 03 02 01 07 a2 30 61 5d 00",
+        // Disarm
+        "09 03 02 01 08 86 0c 72 03 00",
+        // SetTelemetryInterval
+        "0a 03 02 01 09 14 ca 35 4f 32 00",
+        // Heartbeat
+        "09 03 02 01 0a 71 7c 49 e2 00",
+        // ClearFaults
+        "0a 03 02 01 0b 40 e8 48 b5 83 00",
+        // SetCalibration
+        "13 03 02 01 0c e0 12 90 8b 40 bf 0c a0 e8 3b bf 6e 62 e3 00",
+    ];
+    host_examples().into_iter().zip(hex).collect()
 }
 
-/// One instance of every McuMsg variant, in wire order, with its frame bytes (seq 0x0102).
+/// One instance of every McuMsg variant ([`mcu_examples`]), in wire order,
+/// with its frame bytes (seq 0x0102).
 fn mcu_snapshots() -> Vec<(McuMsg, &'static str)> {
-    vec![
-        (
-            McuMsg::HelloReply(HelloReply {
-                protocol_version: PROTOCOL_VERSION,
-                firmware_version: FirmwareVersion {
-                    major: 0,
-                    minor: 1,
-                    patch: 2,
-                },
-                positive_tank_max_pa: POSITIVE_TANK_MAX_PA,
-                negative_tank_min_pa: NEGATIVE_TANK_MIN_PA,
-                chamber_count: CHAMBER_COUNT as u8,
-                reset_cause: ResetCause::IndependentWatchdog,
-                latched_faults: FaultFlags::NONE.with(Fault::PositiveOverLimit),
-                last_stop: LastStop::Panic { line: 300 },
-                min_telemetry_interval_ms: 8,
-            }),
-            "04 02 02 01 02 02 14 01 02 a0 8d 06 cf fa 06 08 03 01 02 ac 02 08 ad 77 7a 37 00",
-        ),
-        (McuMsg::Ack { seq: 513 }, "0b 02 02 01 01 81 04 91 cb 16 be 00"),
-        (
-            McuMsg::Nack {
-                seq: 7,
-                reason: NackReason::Tripped,
-            },
-            "0b 02 02 01 02 07 03 c2 c4 fe 12 00",
-        ),
-        (
-            McuMsg::Telemetry(telemetry()),
-            "0e 02 02 01 03 c0 c4 07 88 a3 04 9b f0 04 02 01 01 01 01 02 02 02 01 08 01 40 03 24 69 30 ef 00",
-        ),
-        (
-            McuMsg::Fault(FaultEvent {
-                time_ms: 42,
-                fault: Fault::PositiveOverLimit,
-                positive_tank_pa: 50_100,
-                negative_tank_pa: -1_000,
-            }),
-            "06 02 02 01 04 2a 0a e8 8e 06 cf 0f af a8 9d 70 00",
-        ),
-    ]
+    let hex = [
+        // HelloReply
+        "04 03 02 01 02 03 27 01 02 a0 8d 06 cf fa 06 08 03 01 02 ac 02 08 e0 12 90 8b 40 bf 0c a0 e8 3b 01 02 01 d4 16 01 bf 0c 02 66 84 42 09 00",
+        // Ack
+        "0b 03 02 01 01 81 04 88 a0 26 51 00",
+        // Nack
+        "0b 03 02 01 02 07 03 db af ce fd 00",
+        // Telemetry
+        "0e 03 02 01 03 c0 c4 07 88 a3 04 9b f0 04 02 01 01 01 01 02 02 02 01 08 01 40 03 2b ed 9e c2 00",
+        // Fault
+        "06 03 02 01 04 2a 0a e8 8e 06 cf 0f 6e 5f ec e7 00",
+    ];
+    mcu_examples().into_iter().zip(hex).collect()
 }
 
 fn check<M: Message + std::fmt::Debug>(snapshots: Vec<(M, &'static str)>) {
@@ -143,6 +88,8 @@ fn check<M: Message + std::fmt::Debug>(snapshots: Vec<(M, &'static str)>) {
 /// The snapshot lists hold exactly one message per variant, in tag order,
 /// so a new variant without a snapshot fails here.
 fn check_covers_every_variant<M: Message>(snapshots: &[(M, &'static str)]) {
+    // `zip` stops at the shorter list: both must be complete.
+    assert_eq!(snapshots.len(), usize::from(M::VARIANT_COUNT));
     let tags: Vec<u8> = snapshots
         .iter()
         .map(|(msg, _)| postcard::to_allocvec(msg).expect("encodes")[0])

@@ -334,6 +334,21 @@ impl<P: Port> Control<'_, P> {
                 last_stop: hello.last_stop,
             });
         }
+        let calibration = hello.calibration;
+        if !calibration.record.is_sound() {
+            tracing::warn!(
+                "the board's sensor calibration record is unusable ({:?}); it runs with {:?}: see `dexitac calibrate --show`",
+                calibration.record,
+                calibration.calibration
+            );
+        } else {
+            tracing::info!(
+                "sensor calibration: {:?} ({:?}, record {:?})",
+                calibration.calibration,
+                calibration.source,
+                calibration.record
+            );
+        }
         self.arm()?;
         let (pos, neg) = self.config.tank_targets_pa;
         let targets =

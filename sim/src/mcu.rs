@@ -10,6 +10,15 @@
 //! [`SimMcu::reset`] restarts the controller (as a board reset would), and
 //! [`SimMcu::snapshot`] shows the outputs the controller drives.
 //!
+//! The sensor calibration the host sets ([`dexitac_protocol::HostMsg::SetCalibration`])
+//! is stored as on the board, in the same record format, in a flash page
+//! kept in memory ([`SimMcuConfig::calibration_page`], erased at first): it
+//! survives [`SimMcu::reset`] and is read back at the restart, like the
+//! board's last flash page. [`SimMcu::calibration`] shows what the
+//! controller applies. The simulated sensors themselves are exact, so a
+//! calibration other than the identity makes the readings differ from the
+//! tank model's pressures, as it would on a board with true sensors.
+//!
 //! [`SimMcu::spawn_with_plant`] also steps a [`Plant`] (actuators, fingers,
 //! object) once per control tick with the tank pressures and the valve
 //! outputs, on the same simulated clock as the host's loop
@@ -23,13 +32,16 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use dexitac_firmware::calibration::RamPage;
 use dexitac_firmware::sensor::{SensorSamples, NOMINAL_FRONT_END, OVERSAMPLE};
 use dexitac_firmware::tank_model::{TankModel, TankModelParams};
 use dexitac_firmware::{
     Clock, Config, Controller, FrameSink, PressureSource, Priority, PumpOutputs, Pumps, QueueFull,
     Valves,
 };
-use dexitac_protocol::{ArmState, Chambers, FaultFlags, ResetCause, ValveState, CHAMBER_COUNT};
+use dexitac_protocol::{
+    ArmState, CalibrationReport, Chambers, FaultFlags, ResetCause, ValveState, CHAMBER_COUNT,
+};
 use serialport::{SerialPort, TTYPort};
 
 use crate::plant::Plant;
@@ -56,6 +68,10 @@ pub struct SimMcuConfig {
     /// The simulated clock shared with the host's loop (None: a new clock
     /// at `speed`, started by the spawn).
     pub clock: Option<SimClock>,
+    /// The flash page of the calibration record at start (erased by
+    /// default); the MCU writes it when the host sets a calibration and
+    /// reads it at every (re)start.
+    pub calibration_page: RamPage,
 }
 
 impl Default for SimMcuConfig {
@@ -65,6 +81,7 @@ impl Default for SimMcuConfig {
             tanks: TankModelParams::default(),
             speed: 1.0,
             clock: None,
+            calibration_page: RamPage::default(),
         }
     }
 }
@@ -151,6 +168,7 @@ impl FrameSink for TxBuffer {
 
 struct Shared {
     snapshot: McuSnapshot,
+    calibration: CalibrationReport,
     reset_requested: bool,
 }
 
@@ -190,8 +208,10 @@ impl SimMcu {
             .map(PathBuf::from)
             .ok_or_else(|| io::Error::other("pty without a name"))?;
         let hw = new_hw(&config);
+        let controller = new_controller(&config, &config.calibration_page, ResetCause::PowerOn);
         let shared = Arc::new(Mutex::new(Shared {
-            snapshot: snapshot(&hw, &new_controller(&config)),
+            snapshot: snapshot(&hw, &controller),
+            calibration: controller.calibration_report(),
             reset_requested: false,
         }));
         let stop = Arc::new(AtomicBool::new(false));
@@ -219,6 +239,12 @@ impl SimMcu {
     /// The latest outputs and state.
     pub fn snapshot(&self) -> McuSnapshot {
         lock(&self.shared).snapshot
+    }
+
+    /// The sensor calibration the controller applies now (as its hello
+    /// reply reports it).
+    pub fn calibration(&self) -> CalibrationReport {
+        lock(&self.shared).calibration
     }
 
     /// Restarts the controller as a board reset would (outputs to the safe
@@ -267,8 +293,9 @@ fn new_hw(config: &SimMcuConfig) -> SimHw {
     }
 }
 
-fn new_controller(config: &SimMcuConfig) -> Controller {
-    Controller::new(config.firmware, ResetCause::PowerOn)
+/// A controller after a reset of `cause`, with the calibration stored in `page`.
+fn new_controller(config: &SimMcuConfig, page: &RamPage, cause: ResetCause) -> Controller {
+    Controller::new(config.firmware, cause).with_calibration_record(&page.bytes)
 }
 
 fn snapshot(hw: &SimHw, controller: &Controller) -> McuSnapshot {
@@ -305,7 +332,8 @@ fn run(
         .unwrap_or_else(|| SimClock::scaled(config.speed));
     let tick_ms = u64::from(config.firmware.tick_period_ms.max(1));
     let mut hw = new_hw(&config);
-    let mut controller = new_controller(&config);
+    let mut page = config.calibration_page.clone();
+    let mut controller = new_controller(&config, &page, ResetCause::PowerOn);
     // Simulated time of the last tick; the firmware's clock is `hw.now_ms`.
     let mut world_ms = clock.now_ms();
     let mut tx = TxBuffer::default();
@@ -313,7 +341,7 @@ fn run(
     while !stop.load(Ordering::Relaxed) {
         if std::mem::take(&mut lock(shared).reset_requested) {
             hw = new_hw(&config);
-            controller = Controller::new(config.firmware, ResetCause::Software);
+            controller = new_controller(&config, &page, ResetCause::Software);
         }
         let n = dexitac_rig::link::read_ready(&mut port, &mut buf)?;
         let now_ms = clock.now_ms();
@@ -328,6 +356,9 @@ fn run(
         // are stamped with the time it resumed, so its own stall never looks
         // like host silence.
         controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
+        // As the board does after each receive: store a new calibration
+        // (only while disarmed, pumps off; in memory here).
+        controller.store_calibration(&mut page);
         // A bounded batch, then back to the port: bytes that arrived during
         // a stall are read before the ticks they preceded run out.
         let mut due_ms = now_ms.min(world_ms + MAX_BATCH_TICKS * tick_ms);
@@ -357,7 +388,9 @@ fn run(
             port.write_all(&tx.0)?;
             tx.0.clear();
         }
-        lock(shared).snapshot = snapshot(&hw, &controller);
+        let mut guard = lock(shared);
+        guard.snapshot = snapshot(&hw, &controller);
+        guard.calibration = controller.calibration_report();
     }
     Ok(())
 }

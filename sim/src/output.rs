@@ -173,6 +173,13 @@ fn host_msg_words(msg: &HostMsg) -> String {
             let names: Vec<String> = faults.iter().map(|f| f.to_string()).collect();
             format!("clear faults: {}", names.join("; "))
         }
+        HostMsg::SetCalibration(c) => format!(
+            "sensor calibration: positive {:+.1} kPa x{:.4}, negative {:+.1} kPa x{:.4}",
+            kpa(c.positive.offset_pa),
+            f64::from(c.positive.gain_ppm) / 1e6,
+            kpa(c.negative.offset_pa),
+            f64::from(c.negative.gain_ppm) / 1e6
+        ),
     }
 }
 

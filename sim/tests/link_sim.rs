@@ -6,8 +6,9 @@ use std::thread;
 use std::time::{Duration, Instant};
 
 use dexitac_protocol::{
-    ArmState, Decoder, EncodedFrame, Fault, FirmwareVersion, HelloReply, HostMsg, McuMsg,
-    NackReason, ResetCause, ValveState, CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
+    ArmState, Calibration, CalibrationRecord, CalibrationSource, Decoder, EncodedFrame, Fault,
+    FirmwareVersion, HelloReply, HostMsg, McuMsg, NackReason, ResetCause, SensorCalibration,
+    ValveState, ZeroSource, CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
 };
 use dexitac_rig::link::{Link, LinkConfig, LinkError, McuEvent, SerialLink};
 use dexitac_sim::mcu::{SimMcu, SimMcuConfig};
@@ -181,6 +182,81 @@ fn a_board_reset_is_seen_and_the_link_reconnects() {
     assert!(wait_for(&mcu, |s| s.state == ArmState::Armed));
 }
 
+fn nack_reason(err: LinkError) -> NackReason {
+    match err {
+        LinkError::Nack { reason, .. } => reason,
+        other => panic!("expected a nack, got {other}"),
+    }
+}
+
+#[test]
+fn a_calibration_is_stored_as_on_the_board_and_survives_a_reset() {
+    let (mcu, mut link) = connect();
+    // A fresh simulated flash page: nothing stored, the identity applies.
+    let report = link.hello().expect("hello").calibration;
+    assert_eq!(report.calibration, Calibration::IDENTITY);
+    assert_eq!(report.source, CalibrationSource::Default);
+    assert_eq!(report.record, CalibrationRecord::Empty);
+    let calibration = Calibration {
+        positive: SensorCalibration {
+            offset_pa: 2_000,
+            gain_ppm: 1_050_000,
+        },
+        negative: SensorCalibration {
+            offset_pa: -1_500,
+            gain_ppm: 970_000,
+        },
+    };
+    // Implausible, or armed: refused, nothing applied.
+    let implausible = Calibration {
+        positive: SensorCalibration {
+            offset_pa: 20_000,
+            gain_ppm: 1_000_000,
+        },
+        ..calibration
+    };
+    let err = link
+        .command(HostMsg::SetCalibration(implausible))
+        .unwrap_err();
+    assert_eq!(nack_reason(err), NackReason::Implausible);
+    link.command(HostMsg::Arm).expect("arm");
+    let err = link
+        .command(HostMsg::SetCalibration(calibration))
+        .unwrap_err();
+    assert_eq!(nack_reason(err), NackReason::Refused);
+    link.command(HostMsg::Disarm).expect("disarm");
+    assert_eq!(mcu.calibration().calibration, Calibration::IDENTITY);
+
+    link.command(HostMsg::SetCalibration(calibration))
+        .expect("calibrate");
+    let report = link.hello().expect("hello").calibration;
+    assert_eq!(report.calibration, calibration);
+    assert_eq!(report.source, CalibrationSource::Host);
+    assert_eq!(report.record, CalibrationRecord::Valid { version: 1 });
+    // The tanks are at atmosphere: the boot zero (about 0 Pa) lies within
+    // the window around both offsets and stays in use.
+    assert_eq!(report.positive_zero.source, ZeroSource::Boot);
+    assert_eq!(mcu.calibration(), report);
+
+    // A board reset: the record is read back from the (simulated) flash.
+    mcu.reset();
+    let until = Instant::now() + Duration::from_secs(2);
+    let after = loop {
+        let reply = link.hello().expect("hello");
+        if reply.reset_cause == ResetCause::Software {
+            break reply;
+        }
+        assert!(Instant::now() < until, "no reset seen");
+        thread::sleep(Duration::from_millis(5));
+    };
+    assert_eq!(after.calibration.calibration, calibration);
+    assert_eq!(after.calibration.source, CalibrationSource::Flash);
+    assert_eq!(
+        after.calibration.record,
+        CalibrationRecord::Valid { version: 1 }
+    );
+}
+
 #[test]
 fn a_silent_port_times_out_after_the_retries() {
     let (host, _device) = TTYPort::pair().expect("pty pair");
@@ -230,6 +306,7 @@ fn another_protocol_version_is_a_clear_error() {
                     latched_faults: Default::default(),
                     last_stop: Default::default(),
                     min_telemetry_interval_ms: 8,
+                    calibration: Default::default(),
                 });
                 device
                     .write_all(&EncodedFrame::new(0, &reply).expect("fits"))

@@ -6,7 +6,10 @@
 //! with USART1 on a pseudo-terminal, and checks from the host side: hello,
 //! ping, arm, set chambers, the telemetry stream, a malformed and a
 //! corrupted frame (nothing actuated), the guard band and the telemetry
-//! minimum, host silence -> tripped within the deadline, and the latch:
+//! minimum, the sensor calibration (an implausible one refused, a plausible
+//! one applied and reported in the hello reply as not persisted: the QEMU
+//! build has no flash store; refused while armed), host silence -> tripped
+//! within the deadline, and the latch:
 //! disarm does not clear it, the hello reply reports it, `ClearFaults`
 //! naming it does.
 //!
@@ -22,9 +25,10 @@ use std::time::{Duration, Instant};
 
 use crc::{Crc, CRC_32_ISCSI};
 use dexitac_protocol::{
-    ArmState, Decoder, EncodedFrame, Fault, FaultEvent, FaultFlags, HelloReply, HostMsg, LastStop,
-    McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets, Telemetry, ValveState,
-    CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
+    ArmState, Calibration, CalibrationRecord, CalibrationSource, Decoder, EncodedFrame, Fault,
+    FaultEvent, FaultFlags, HelloReply, HostMsg, LastStop, McuMsg, Message, NackReason, PumpMode,
+    ResetCause, SensorCalibration, TankTargets, Telemetry, ValveState, ZeroSource, CHAMBER_COUNT,
+    NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
 };
 use serialport::TTYPort;
 
@@ -323,7 +327,58 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
         dexitac_firmware::control::min_telemetry_interval_ms(115_200)
     );
 
+    // No flash store in the QEMU build: identity calibration, nothing
+    // persisted; the boot zero (tanks at atmosphere) applies once taken,
+    // 32 ms of firmware time after boot (the first hello may come sooner).
+    let cal = hello.calibration;
+    assert_eq!(cal.calibration, Calibration::IDENTITY);
+    assert_eq!(cal.source, CalibrationSource::Default);
+    assert_eq!(cal.record, CalibrationRecord::NotPersisted);
+    let until = Instant::now() + Duration::from_secs(3);
+    let cal = loop {
+        let cal = host.hello().calibration;
+        if cal.positive_zero.source != ZeroSource::Pending {
+            break cal;
+        }
+        assert!(Instant::now() < until, "no boot zero within 3 s: {cal:?}");
+        thread::sleep(Duration::from_millis(10));
+    };
+    assert_eq!(cal.positive_zero.source, ZeroSource::Boot, "{cal:?}");
+    assert_eq!(cal.negative_zero.source, ZeroSource::Boot, "{cal:?}");
+
     host.ack(HostMsg::Ping { nonce: 0xD3C1 });
+
+    // Calibration: an implausible gain is refused and nothing applies; a
+    // plausible one applies at once and shows in the hello reply.
+    let calibration = Calibration {
+        positive: SensorCalibration {
+            offset_pa: 1_500,
+            gain_ppm: 1_020_000,
+        },
+        negative: SensorCalibration {
+            offset_pa: -1_000,
+            gain_ppm: 990_000,
+        },
+    };
+    host.nack(
+        HostMsg::SetCalibration(Calibration {
+            negative: SensorCalibration {
+                offset_pa: 0,
+                gain_ppm: 1_500_000,
+            },
+            ..calibration
+        }),
+        NackReason::Implausible,
+    );
+    assert_eq!(host.hello().calibration.calibration, Calibration::IDENTITY);
+    host.ack(HostMsg::SetCalibration(calibration));
+    let cal = host.hello().calibration;
+    assert_eq!(cal.calibration, calibration);
+    assert_eq!(cal.source, CalibrationSource::Host);
+    assert_eq!(cal.record, CalibrationRecord::NotPersisted);
+    // The boot readings (about 0 Pa) lie within 4 kPa of the new offsets.
+    assert_eq!(cal.positive_zero.source, ZeroSource::Boot);
+    assert!(cal.positive_zero.zero_pa.abs() < 1_000, "{cal:?}");
 
     // Not armed: valve commands are refused.
     let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
@@ -361,6 +416,11 @@ fn firmware_under_qemu_obeys_the_host_and_trips_on_silence() {
         negative: PumpMode::Regulate,
     });
     host.ack(HostMsg::SetChambers { chambers });
+    // Armed: a calibration is refused.
+    host.nack(
+        HostMsg::SetCalibration(Calibration::IDENTITY),
+        NackReason::Refused,
+    );
     host.telemetry.clear();
     host.keep_alive(Duration::from_millis(1500));
 

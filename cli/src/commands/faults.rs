@@ -7,24 +7,17 @@
 //! 2 when the board cannot be reached or refuses (a named fault's condition
 //! is still present: nothing is cleared).
 
-use std::path::PathBuf;
-
 use anyhow::{anyhow, Context};
 use dexitac_protocol::{Fault, FaultFlags, HelloReply, HostMsg};
-use dexitac_rig::config::RigConfig;
-use dexitac_rig::link::{Link, LinkConfig};
 
 use crate::exit::Outcome;
+use crate::shared::board::BoardArgs;
 
 /// Arguments of `dexitac faults`.
 #[derive(Debug, clap::Args)]
 pub struct FaultsArgs {
-    /// Serial port of the board; default: the rig config's `[link] port`.
-    #[arg(long, value_name = "PATH")]
-    port: Option<PathBuf>,
-    /// Rig config (for the port and the baud rate).
-    #[arg(long, value_name = "RIG.toml")]
-    config: Option<PathBuf>,
+    #[command(flatten)]
+    board: BoardArgs,
     /// Acknowledge these latched faults (names as listed, comma-separated,
     /// or `all`) once their cause is found and removed.
     #[arg(long, value_name = "FAULT,...", value_delimiter = ',')]
@@ -76,17 +69,7 @@ fn describe(hello: &HelloReply) {
 impl FaultsArgs {
     /// Runs `dexitac faults`.
     pub fn run(&self) -> anyhow::Result<Outcome> {
-        let rig: Option<RigConfig> = self.config.as_deref().map(RigConfig::load).transpose()?;
-        let port = self
-            .port
-            .clone()
-            .or_else(|| rig.as_ref().and_then(|r| r.link.port.clone()))
-            .ok_or_else(|| anyhow!("give --port, or a rig config with a [link] port"))?;
-        let link_config = rig
-            .as_ref()
-            .map_or_else(LinkConfig::default, RigConfig::link);
-        let mut link = Link::open(&port, link_config)
-            .with_context(|| format!("opening {}", port.display()))?;
+        let mut link = self.board.open()?;
         let hello = link.hello().context("hello")?;
         describe(&hello);
         if self.clear.is_empty() {

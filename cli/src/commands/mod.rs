@@ -3,6 +3,7 @@
 
 pub mod analyze;
 pub mod bench_pipeline;
+pub mod calibrate;
 pub mod cameras;
 pub mod completions;
 pub mod faults;

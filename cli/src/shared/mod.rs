@@ -1,9 +1,11 @@
 //! What several commands share: argument groups and their set-up (frame
-//! sources, recording flags, the live view) and the Ctrl-C handler.
+//! sources, recording flags, the live view, the board's port) and the
+//! Ctrl-C handler.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
+pub mod board;
 pub mod live;
 pub mod out_dir;
 pub mod progress;

@@ -10,15 +10,16 @@
 //! | `SealAll` (all valves closed) | ack | ack | ack |
 //! | `VentAll` (all outlets open, pump modes off) | ack; nack `Refused` while the negative tank is past its limit or has no valid reading | same | same |
 //! | `SetChambers`, `SetPumps` | nack `NotArmed` | ack | nack `Tripped` |
-//! | `Arm` | ack, unless a fault condition is present or the sensors are not zeroed yet: nack `Refused` | ack | nack `Tripped` |
+//! | `Arm` | ack, unless a fault condition is present, the sensors are not zeroed yet or a calibration waits to be stored: nack `Refused` | ack | nack `Tripped` |
 //! | `Disarm` (pumps off, valves sealed; faults stay latched) | ack | ack -> disarmed | ack, stays tripped |
 //! | `ClearFaults { faults }` | ack | ack | clears the named faults; nack `Refused` (nothing cleared) while a named fault's condition is present; with no fault left -> disarmed |
+//! | `SetCalibration` (applied at once, then stored: [`Controller::store_calibration`]) | ack; nack `Implausible` unless [`dexitac_protocol::Calibration::check`] passes | nack `Refused` | nack `Tripped` |
 //!
 //! A refused command changes nothing.
 
 use dexitac_protocol::{
-    ArmState, FaultFlags, HelloReply, HostMsg, McuMsg, NackReason, PumpMode, CHAMBER_COUNT,
-    NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
+    ArmState, Calibration, FaultFlags, HelloReply, HostMsg, McuMsg, NackReason, PumpMode,
+    CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
 };
 
 use super::valves::{SAFE_CHAMBERS, VENT_CHAMBERS};
@@ -85,6 +86,7 @@ fn apply(ctl: &mut Controller, msg: HostMsg, now_ms: u32) -> Result<Reply, NackR
             ctl.enter_safe_state();
         }
         HostMsg::ClearFaults { faults } => clear_faults(ctl, faults)?,
+        HostMsg::SetCalibration(calibration) => calibrate(ctl, calibration)?,
     }
     Ok(Reply::Ack)
 }
@@ -101,7 +103,11 @@ fn arm(ctl: &mut Controller) -> Result<(), NackReason> {
     match ctl.state {
         ArmState::Armed => Ok(()),
         ArmState::Tripped => Err(NackReason::Tripped),
-        ArmState::Disarmed if !ctl.present.is_empty() || !ctl.zeroed() => Err(NackReason::Refused),
+        ArmState::Disarmed
+            if !ctl.present.is_empty() || !ctl.zeroed() || ctl.calibration_write_pending() =>
+        {
+            Err(NackReason::Refused)
+        }
         ArmState::Disarmed => {
             ctl.state = ArmState::Armed;
             Ok(())
@@ -121,6 +127,18 @@ fn clear_faults(ctl: &mut Controller, faults: FaultFlags) -> Result<(), NackReas
     Ok(())
 }
 
+/// Applies a calibration: only while disarmed, only a plausible one.
+fn calibrate(ctl: &mut Controller, calibration: Calibration) -> Result<(), NackReason> {
+    match ctl.state {
+        ArmState::Disarmed => {}
+        ArmState::Armed => return Err(NackReason::Refused),
+        ArmState::Tripped => return Err(NackReason::Tripped),
+    }
+    calibration.check().map_err(|_| NackReason::Implausible)?;
+    ctl.set_calibration(calibration);
+    Ok(())
+}
+
 fn hello_reply(ctl: &Controller) -> HelloReply {
     HelloReply {
         protocol_version: PROTOCOL_VERSION,
@@ -133,5 +151,6 @@ fn hello_reply(ctl: &Controller) -> HelloReply {
         latched_faults: ctl.faults,
         last_stop: ctl.last_stop,
         min_telemetry_interval_ms: ctl.config.min_telemetry_interval_ms(),
+        calibration: ctl.calibration_report(),
     }
 }

@@ -8,10 +8,15 @@
 //!   answered with an ack, a nack or a hello reply. Commands change the
 //!   *desired* state only.
 //! - [`Controller::tick`] once per control period (1 ms): converts and
-//!   filters the sensor samples ([`crate::sensor`], [`filter`]), evaluates
-//!   every trip condition ([`safety`]), regulates the pumps ([`pumps`]),
-//!   drives the valves through their dead time ([`valves::ValveDriver`]),
-//!   writes the outputs, and sends fault events and telemetry.
+//!   filters the sensor samples ([`crate::sensor`], [`filter`]), corrects
+//!   the filtered readings by the sensor calibration
+//!   ([`crate::calibration`]), evaluates every trip condition ([`safety`]),
+//!   regulates the pumps ([`pumps`]), drives the valves through their dead
+//!   time ([`valves::ValveDriver`]), writes the outputs, and sends fault
+//!   events and telemetry.
+//! - [`Controller::store_calibration`] after `receive`, on the board: writes
+//!   a calibration the host set to its [`CalibrationStore`] (flash), only
+//!   while not armed with both pumps off.
 //!
 //! The outputs are written only by `tick`, so a command takes effect at the
 //! next tick (at most one period later, plus the valve dead time when a
@@ -58,16 +63,18 @@ pub mod safety;
 pub mod valves;
 
 use dexitac_protocol::{
-    ArmState, Chambers, Decoder, EncodedFrame, Fault, FaultEvent, FaultFlags, FrameError, HostMsg,
-    LastStop, McuMsg, NackReason, PumpMode, ResetCause, TankTargets, Telemetry, ValveState,
-    MAX_FRAME_LEN,
+    ActiveZero, ArmState, Calibration, CalibrationRecord, CalibrationReport, CalibrationSource,
+    Chambers, Decoder, EncodedFrame, Fault, FaultEvent, FaultFlags, FrameError, HostMsg, LastStop,
+    McuMsg, NackReason, PumpMode, ResetCause, TankTargets, Telemetry, ValveState,
+    MAX_TELEMETRY_FRAME_LEN,
 };
 
+use crate::calibration::{self, CalibrationStore, StoreError};
 use crate::queue::{FrameSink, Priority};
-use crate::sensor::{FrontEnd, NOMINAL_FRONT_END};
+use crate::sensor::NOMINAL_FRONT_END;
 use hw::{Clock, PressureSource, Pumps, SensorError, Valves};
 use pumps::{MonitorLimits, PumpMonitor, Tank};
-use safety::{valid_reading, TankChannel};
+use safety::{valid_reading, Correction, TankChannel};
 use valves::{ValveDriver, SAFE_CHAMBERS};
 
 /// Run-time tunables of the safety loop. The hard tank limits are not
@@ -115,8 +122,8 @@ pub struct Config {
     /// Consecutive ticks a condition must hold before it trips (filtered
     /// reading past a limit, no valid reading).
     pub trip_after_ticks: u32,
-    /// Accepted distance of the boot-time zero reading from the nominal
-    /// zero, in pascal.
+    /// Accepted distance of the boot-time zero reading from the expected
+    /// zero (the calibration's offset, 0 Pa without one), in pascal.
     pub zero_window_pa: i32,
     /// Baud rate of the host link (for the smallest telemetry interval).
     pub link_baud: u32,
@@ -183,9 +190,10 @@ pub const DEFAULT_GUARD_BAND_PA: i32 = 6_000;
 pub const DEFAULT_VALVE_DEAD_TIME_MS: u32 = 30;
 /// Default consecutive ticks before a trip: 3.
 pub const DEFAULT_TRIP_AFTER_TICKS: u32 = 3;
-/// Default accepted boot zero: within ±4 kPa of nominal (a sensor's zero
-/// tolerance, about ±1 % of its 400 kPa span). A reading further away
-/// (tank still pressurised after a reset) keeps the nominal zero.
+/// Default accepted boot zero: within ±4 kPa of the expected zero (a
+/// sensor's zero tolerance, about ±1 % of its 400 kPa span; the expected
+/// zero is the calibration's offset, 0 Pa without one). A reading further
+/// away (tank still pressurised after a reset) keeps the expected zero.
 pub const DEFAULT_ZERO_WINDOW_PA: i32 = 4_000;
 /// Default link baud rate: 115 200.
 pub const DEFAULT_LINK_BAUD: u32 = 115_200;
@@ -193,11 +201,12 @@ pub const DEFAULT_LINK_BAUD: u32 = 115_200;
 pub const ZERO_AT_TICK: u32 = 2 * filter::FILTER_TICKS as u32;
 
 /// The smallest telemetry interval for a link of `baud` (8N1, 10 bits a
-/// byte): twice the line time of the largest frame, so at least half the
-/// line stays free for replies and fault events. 8 ms at 115 200 baud
-/// (a 44-byte frame takes 3.8 ms).
+/// byte): twice the line time of the largest telemetry frame
+/// ([`MAX_TELEMETRY_FRAME_LEN`]), so at least half the line stays free for
+/// replies and fault events. 8 ms at 115 200 baud (a 44-byte frame takes
+/// 3.8 ms).
 pub const fn min_telemetry_interval_ms(baud: u32) -> u16 {
-    let bits = 2 * MAX_FRAME_LEN as u64 * 10 * 1_000;
+    let bits = 2 * MAX_TELEMETRY_FRAME_LEN as u64 * 10 * 1_000;
     let baud = if baud == 0 { 1 } else { baud as u64 };
     let ms = bits.div_ceil(baud);
     if ms > u16::MAX as u64 {
@@ -325,8 +334,13 @@ pub struct TickReport {
 enum Zero {
     /// Waiting for [`ZERO_AT_TICK`] ticks of readings.
     Pending { ticks: u32 },
-    /// Done: the zero offsets are in the front ends.
-    Done,
+    /// Done: each sensor's settled reading of atmosphere then (before any
+    /// correction), if it had a valid one. Whether it is the zero in use
+    /// depends on the calibration ([`calibration::choose_zero`]).
+    Done {
+        positive_pa: Option<i32>,
+        negative_pa: Option<i32>,
+    },
 }
 
 /// The safety loop. See the [module docs](self) and the fault table in the
@@ -352,9 +366,12 @@ pub struct Controller {
     pumps: PumpOutputs,
     positive: TankChannel,
     negative: TankChannel,
-    positive_front_end: FrontEnd,
-    negative_front_end: FrontEnd,
     zero: Zero,
+    calibration: Calibration,
+    calibration_source: CalibrationSource,
+    calibration_record: CalibrationRecord,
+    /// A calibration from the host waits for [`Controller::store_calibration`].
+    calibration_write_pending: bool,
     positive_monitor: PumpMonitor,
     negative_monitor: PumpMonitor,
     /// The pumps the regulator wants (its hysteresis state); a pump held
@@ -375,6 +392,9 @@ impl Controller {
     /// A disarmed controller in the safe state. `reset_cause` is reported
     /// in the hello reply.
     pub fn new(config: Config, reset_cause: ResetCause) -> Self {
+        // Built in place (no local to move out: the controller is large).
+        // The identity calibration and the pending zero need no correction,
+        // which is what `TankChannel::new` starts with.
         Controller {
             config,
             reset_cause,
@@ -392,9 +412,11 @@ impl Controller {
             pumps: PumpOutputs::OFF,
             positive: TankChannel::new(),
             negative: TankChannel::new(),
-            positive_front_end: NOMINAL_FRONT_END,
-            negative_front_end: NOMINAL_FRONT_END,
             zero: Zero::Pending { ticks: 0 },
+            calibration: Calibration::IDENTITY,
+            calibration_source: CalibrationSource::Default,
+            calibration_record: CalibrationRecord::NotPersisted,
+            calibration_write_pending: false,
             positive_monitor: PumpMonitor::default(),
             negative_monitor: PumpMonitor::default(),
             demand: PumpOutputs::OFF,
@@ -414,6 +436,32 @@ impl Controller {
     pub fn with_last_stop(mut self, last_stop: LastStop) -> Self {
         self.last_stop = last_stop;
         self
+    }
+
+    /// The same controller, with the calibration stored in `page`
+    /// ([`Controller::load_calibration_record`]).
+    pub fn with_calibration_record(mut self, page: &[u8]) -> Self {
+        self.load_calibration_record(page);
+        self
+    }
+
+    /// Applies the calibration stored in `page` (the flash page of the
+    /// record, [`calibration::decode`]) if it holds a valid record, else
+    /// the identity; the hello reply reports which. Called once at boot.
+    pub fn load_calibration_record(&mut self, page: &[u8]) {
+        let loaded = calibration::decode(page);
+        self.calibration_record = loaded.record;
+        match loaded.calibration {
+            Some(stored) => {
+                self.calibration = stored;
+                self.calibration_source = CalibrationSource::Flash;
+            }
+            None => {
+                self.calibration = Calibration::IDENTITY;
+                self.calibration_source = CalibrationSource::Default;
+            }
+        }
+        self.apply_calibration();
     }
 
     /// Latches `fault` at the next tick (a condition found outside the
@@ -447,21 +495,107 @@ impl Controller {
         self.pumps
     }
 
-    /// The filtered tank readings of the last tick: (positive, negative).
+    /// The filtered, corrected tank readings of the last tick: (positive,
+    /// negative).
     pub fn readings(&self) -> (Result<i32, SensorError>, Result<i32, SensorError>) {
         (self.positive.reading(), self.negative.reading())
     }
 
-    /// The zero offsets in use, in pascal (positive, negative), once the
+    /// The zeros in use, in pascal (positive, negative), once the
     /// boot-time zeroing is done.
     pub fn zero_offsets_pa(&self) -> Option<(i32, i32)> {
         match self.zero {
-            Zero::Done => Some((
-                self.positive_front_end.zero_pa,
-                self.negative_front_end.zero_pa,
+            Zero::Done { .. } => Some((
+                self.positive.correction().zero_pa,
+                self.negative.correction().zero_pa,
             )),
             Zero::Pending { .. } => None,
         }
+    }
+
+    /// The calibration in use, where it came from, its flash record and the
+    /// zeros (the hello reply's [`dexitac_protocol::HelloReply::calibration`]).
+    pub fn calibration_report(&self) -> CalibrationReport {
+        CalibrationReport {
+            calibration: self.calibration,
+            source: self.calibration_source,
+            record: self.calibration_record,
+            positive_zero: self.active_zero(Tank::Positive),
+            negative_zero: self.active_zero(Tank::Negative),
+        }
+    }
+
+    /// Whether a calibration from the host waits to be stored
+    /// ([`Controller::store_calibration`]).
+    pub fn calibration_write_pending(&self) -> bool {
+        self.calibration_write_pending
+    }
+
+    /// Writes a calibration the host set since the last call to `store`,
+    /// if the MCU is not armed and both pumps are off (else it stays
+    /// pending; arming waits for it). Returns the record's new state when
+    /// it wrote (or tried to).
+    ///
+    /// The board calls this after [`Controller::receive`], having fed the
+    /// watchdog: a flash page erase stalls the STM32F103 for up to 40 ms.
+    pub fn store_calibration(
+        &mut self,
+        store: &mut impl CalibrationStore,
+    ) -> Option<CalibrationRecord> {
+        if !self.calibration_write_pending
+            || self.state == ArmState::Armed
+            || self.pumps != PumpOutputs::OFF
+        {
+            return None;
+        }
+        self.calibration_write_pending = false;
+        self.calibration_record = match store.write_record(&calibration::encode(&self.calibration))
+        {
+            Ok(()) => CalibrationRecord::Valid {
+                version: calibration::RECORD_VERSION,
+            },
+            Err(StoreError::NotPersisted) => CalibrationRecord::NotPersisted,
+            Err(StoreError::Failed) => CalibrationRecord::WriteFailed,
+        };
+        Some(self.calibration_record)
+    }
+
+    /// Applies `calibration` at once (from the host; the dispatcher checked
+    /// state and plausibility) and marks it for the store.
+    fn set_calibration(&mut self, calibration: Calibration) {
+        self.calibration = calibration;
+        self.calibration_source = CalibrationSource::Host;
+        self.calibration_record = CalibrationRecord::WritePending;
+        self.calibration_write_pending = true;
+        self.apply_calibration();
+    }
+
+    /// The zero `tank`'s readings are corrected by.
+    fn active_zero(&self, tank: Tank) -> ActiveZero {
+        let (boot_pa, zeroed) = match (self.zero, tank) {
+            (Zero::Pending { .. }, _) => (None, false),
+            (Zero::Done { positive_pa, .. }, Tank::Positive) => (positive_pa, true),
+            (Zero::Done { negative_pa, .. }, Tank::Negative) => (negative_pa, true),
+        };
+        let sensor = match tank {
+            Tank::Positive => self.calibration.positive,
+            Tank::Negative => self.calibration.negative,
+        };
+        calibration::choose_zero(sensor, boot_pa, zeroed, self.config.zero_window_pa)
+    }
+
+    /// Sets both channels' corrections from the calibration and the zeros.
+    fn apply_calibration(&mut self) {
+        let positive = Correction {
+            zero_pa: self.active_zero(Tank::Positive).zero_pa,
+            gain_ppm: self.calibration.positive.gain_ppm,
+        };
+        let negative = Correction {
+            zero_pa: self.active_zero(Tank::Negative).zero_pa,
+            gain_ppm: self.calibration.negative.gain_ppm,
+        };
+        self.positive.set_correction(positive);
+        self.negative.set_correction(negative);
     }
 
     /// Ticks that came later than the control period.
@@ -515,13 +649,11 @@ impl Controller {
         let samples = hw.read_samples();
         self.positive.update(
             Tank::Positive,
-            self.positive_front_end
-                .convert(&samples.positive, &samples.supply),
+            NOMINAL_FRONT_END.convert(&samples.positive, &samples.supply),
         );
         self.negative.update(
             Tank::Negative,
-            self.negative_front_end
-                .convert(&samples.negative, &samples.supply),
+            NOMINAL_FRONT_END.convert(&samples.negative, &samples.supply),
         );
         self.zero_if_due();
 
@@ -564,9 +696,10 @@ impl Controller {
     }
 
     /// Zeroes both sensors once, [`ZERO_AT_TICK`] ticks after boot, on the
-    /// reading of atmosphere (pumps off and valves closed since boot). A
-    /// reading outside [`Config::zero_window_pa`] (or none) keeps the
-    /// nominal zero of 0 Pa.
+    /// settled, uncorrected reading of atmosphere (pumps off and valves
+    /// closed since boot). A reading outside [`Config::zero_window_pa`] of
+    /// the calibration's offset (or none) keeps the offset
+    /// ([`calibration::choose_zero`]).
     fn zero_if_due(&mut self) {
         let Zero::Pending { ticks } = self.zero else {
             return;
@@ -575,22 +708,19 @@ impl Controller {
             self.zero = Zero::Pending { ticks: ticks + 1 };
             return;
         }
-        let window = self.config.zero_window_pa;
-        let zero_of = |channel: &TankChannel| {
-            valid_reading(channel.reading())
-                .filter(|pa| pa.abs() <= window && channel.settled())
-                .unwrap_or(0)
+        let atmosphere = |channel: &TankChannel| {
+            valid_reading(channel.uncorrected()).filter(|_| channel.settled())
         };
-        self.positive_front_end = NOMINAL_FRONT_END.with_zero_pa(zero_of(&self.positive));
-        self.negative_front_end = NOMINAL_FRONT_END.with_zero_pa(zero_of(&self.negative));
-        self.positive.reset_filter();
-        self.negative.reset_filter();
-        self.zero = Zero::Done;
+        self.zero = Zero::Done {
+            positive_pa: atmosphere(&self.positive),
+            negative_pa: atmosphere(&self.negative),
+        };
+        self.apply_calibration();
     }
 
     /// Whether the boot-time zeroing is done (arming waits for it).
     pub fn zeroed(&self) -> bool {
-        self.zero == Zero::Done
+        matches!(self.zero, Zero::Done { .. })
     }
 
     /// Every condition present now (host silence only while armed).

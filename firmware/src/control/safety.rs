@@ -2,7 +2,9 @@
 //! faults it shows.
 //!
 //! Input: one tick's pressure of the tank (pascal, or a [`SensorError`]) and
-//! the pump monitor's findings. Output: [`FaultFlags`]. A reading trips only
+//! the pump monitor's findings. The filtered value is corrected by the
+//! sensor's zero and gain ([`crate::calibration::correct`]) before any
+//! check. Output: [`FaultFlags`]. A reading trips only
 //! after [`crate::Config::trip_after_ticks`] consecutive ticks (of the
 //! filtered value past the limit, or of no valid reading), so one noisy
 //! sample or one EMI spike cannot trip. The hard limits come from the
@@ -41,10 +43,35 @@ pub fn valid_reading(reading: Result<i32, SensorError>) -> Option<i32> {
         .filter(|pa| (SENSOR_MIN_PA..=SENSOR_MAX_PA).contains(pa))
 }
 
-/// One tank's filtered reading and trip counters.
+/// The correction of one sensor's filtered reading: a zero subtracted,
+/// then a gain ([`crate::calibration::correct`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Correction {
+    /// Subtracted from the filtered reading, in pascal.
+    pub zero_pa: i32,
+    /// Applied after the zero, in parts per million.
+    pub gain_ppm: u32,
+}
+
+impl Correction {
+    /// No correction.
+    pub const NONE: Correction = Correction {
+        zero_pa: 0,
+        gain_ppm: dexitac_protocol::GAIN_UNITY_PPM,
+    };
+
+    fn apply(self, filtered_pa: i32) -> i32 {
+        crate::calibration::correct(filtered_pa, self.zero_pa, self.gain_ppm)
+    }
+}
+
+/// One tank's filtered, corrected reading and trip counters.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct TankChannel {
     filter: MovingAverage,
+    correction: Correction,
+    /// The filtered reading before the correction.
+    uncorrected: Result<i32, SensorError>,
     reading: Result<i32, SensorError>,
     invalid_ticks: u32,
     over_limit_ticks: u32,
@@ -61,47 +88,69 @@ impl TankChannel {
     pub const fn new() -> Self {
         TankChannel {
             filter: MovingAverage::new(),
+            correction: Correction::NONE,
+            uncorrected: Err(SensorError::NoSample),
             reading: Err(SensorError::NoSample),
             invalid_ticks: 0,
             over_limit_ticks: 0,
         }
     }
 
-    /// Takes one tick's pressure: a valid one enters the filter, an invalid
-    /// one counts toward the sensor fault (and makes the reading an error,
-    /// so the pump stops at once).
+    /// Takes one tick's pressure: a valid one enters the filter and the
+    /// filtered value is corrected, an invalid one counts toward the sensor
+    /// fault (and makes the reading an error, so the pump stops at once).
     pub fn update(&mut self, tank: Tank, raw: Result<i32, SensorError>) {
         match valid_reading(raw) {
             Some(pa) => {
                 let filtered = self.filter.push(pa);
-                self.reading = Ok(filtered);
+                self.uncorrected = Ok(filtered);
+                let corrected = self.correction.apply(filtered);
+                self.reading = Ok(corrected);
                 self.invalid_ticks = 0;
-                self.over_limit_ticks = if tank.at_or_past_limit(filtered) {
+                self.over_limit_ticks = if tank.at_or_past_limit(corrected) {
                     self.over_limit_ticks.saturating_add(1)
                 } else {
                     0
                 };
             }
             None => {
-                self.reading = Err(raw.err().unwrap_or(SensorError::OutOfRange));
+                let error = Err(raw.err().unwrap_or(SensorError::OutOfRange));
+                self.uncorrected = error;
+                self.reading = error;
                 self.invalid_ticks = self.invalid_ticks.saturating_add(1);
             }
         }
     }
 
-    /// The filtered reading of the last tick, or why there is none.
+    /// Corrects the readings from now on by `correction`; the last reading
+    /// is corrected again at once (the over-limit count goes on from the
+    /// next tick, on the new value).
+    pub fn set_correction(&mut self, correction: Correction) {
+        self.correction = correction;
+        if let Ok(filtered) = self.uncorrected {
+            self.reading = Ok(correction.apply(filtered));
+        }
+    }
+
+    /// The correction in use.
+    pub const fn correction(&self) -> Correction {
+        self.correction
+    }
+
+    /// The filtered, corrected reading of the last tick, or why there is none.
     pub const fn reading(&self) -> Result<i32, SensorError> {
         self.reading
+    }
+
+    /// The filtered reading of the last tick before the correction (what
+    /// the boot zero measures).
+    pub const fn uncorrected(&self) -> Result<i32, SensorError> {
+        self.uncorrected
     }
 
     /// Whether the filter holds a full window.
     pub const fn settled(&self) -> bool {
         self.filter.is_full()
-    }
-
-    /// Forgets the filter (after a change of the zero offset).
-    pub fn reset_filter(&mut self) {
-        self.filter.reset();
     }
 
     /// The conditions this tank shows now.

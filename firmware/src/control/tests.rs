@@ -11,15 +11,18 @@ use std::vec;
 use std::vec::Vec;
 
 use dexitac_protocol::{
-    ArmState, Chambers, Decoder, EncodedFrame, Fault, FaultFlags, Frame, FrameError, HostMsg,
-    LastStop, McuMsg, Message, NackReason, PumpMode, ResetCause, TankTargets, ValveState,
-    CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
+    ArmState, Calibration, CalibrationRecord, CalibrationSource, Chambers, Decoder, EncodedFrame,
+    Fault, FaultFlags, Frame, FrameError, HostMsg, LastStop, McuMsg, Message, NackReason, PumpMode,
+    ResetCause, SensorCalibration, TankTargets, ValveState, ZeroSource, CALIBRATION_GAIN_MAX_PPM,
+    CALIBRATION_GAIN_MIN_PPM, CALIBRATION_OFFSET_MAX_PA, CHAMBER_COUNT, GAIN_UNITY_PPM,
+    NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA,
 };
 use proptest::prelude::*;
 
 use super::hw::{Clock, PressureSource, Pumps, SensorError, Valves};
 use super::valves::{ValveLevels, SAFE_CHAMBERS, VENT_CHAMBERS};
 use super::*;
+use crate::calibration::{NoStore, RamPage, RECORD_LEN, RECORD_VERSION};
 use crate::queue::TxQueues;
 use crate::sensor::{SensorSamples, NOMINAL_FRONT_END, OVERSAMPLE};
 use crate::tank_model::{TankModel, TankModelParams};
@@ -97,6 +100,9 @@ struct Rig {
     noise_pa: i32,
     /// Each sensor's zero error, in pascal (positive, negative).
     offset_pa: (i32, i32),
+    /// Each sensor's gain error, in ppm (positive, negative): it shows
+    /// `true * gain + offset`.
+    gain_ppm: (u32, u32),
     sensor_faults: (SensorFault, SensorFault),
     /// A dead pump does not move air whatever its output says.
     pump_dead: (bool, bool),
@@ -124,6 +130,7 @@ impl Rig {
             vdda_mv: 3_300,
             noise_pa: 0,
             offset_pa: (0, 0),
+            gain_ppm: (GAIN_UNITY_PPM, GAIN_UNITY_PPM),
             sensor_faults: (SensorFault::None, SensorFault::None),
             pump_dead: (false, false),
             rng: 0x9E37_79B9_7F4A_7C15,
@@ -164,10 +171,11 @@ impl Rig {
     fn channel(
         &mut self,
         pa: Result<i32, SensorError>,
-        offset_pa: i32,
+        (offset_pa, gain_ppm): (i32, u32),
         fault: SensorFault,
     ) -> Result<[u16; OVERSAMPLE], SensorError> {
-        let pa = pa?;
+        let shown = i64::from(pa?) * i64::from(gain_ppm) / i64::from(GAIN_UNITY_PPM);
+        let pa = i32::try_from(shown).unwrap();
         let mut out = [0u16; OVERSAMPLE];
         for c in out.iter_mut() {
             let noisy = pa + offset_pa + self.next_noise_pa();
@@ -205,8 +213,8 @@ impl Clock for Rig {
 impl PressureSource for Rig {
     fn read_samples(&mut self) -> SensorSamples {
         let (p, n) = self.true_pa();
-        let positive = self.channel(p, self.offset_pa.0, self.sensor_faults.0);
-        let negative = self.channel(n, self.offset_pa.1, self.sensor_faults.1);
+        let positive = self.channel(p, (self.offset_pa.0, self.gain_ppm.0), self.sensor_faults.0);
+        let negative = self.channel(n, (self.offset_pa.1, self.gain_ppm.1), self.sensor_faults.1);
         let supply = NOMINAL_FRONT_END.supply_counts(self.supply_mv, self.vdda_mv);
         SensorSamples {
             positive,
@@ -440,6 +448,14 @@ fn hello_reports_versions_limits_latches_and_last_stop() {
         FaultFlags::NONE.with(Fault::ClockFallback)
     );
     assert_eq!(h.min_telemetry_interval_ms, 8);
+    // No calibration store given: identity, not persisted; zeros pending
+    // (one tick after boot).
+    let cal = h.calibration;
+    assert_eq!(cal.calibration, Calibration::IDENTITY);
+    assert_eq!(cal.source, CalibrationSource::Default);
+    assert_eq!(cal.record, CalibrationRecord::NotPersisted);
+    assert_eq!(cal.positive_zero.source, ZeroSource::Pending);
+    assert_eq!(cal.negative_zero.zero_pa, 0);
 }
 
 #[test]
@@ -1048,7 +1064,23 @@ fn host_msg() -> impl Strategy<Value = HostMsg> {
         2 => fault_flags().prop_map(|faults| HostMsg::ClearFaults { faults }),
         1 => (0u16..50).prop_map(|interval_ms| HostMsg::SetTelemetryInterval { interval_ms }),
         3 => Just(HostMsg::Heartbeat),
+        1 => calibration_msg(),
     ]
+}
+
+/// Calibrations, plausible or not (about half of each).
+fn calibration_msg() -> impl Strategy<Value = HostMsg> {
+    let sensor = (
+        -2 * CALIBRATION_OFFSET_MAX_PA..=2 * CALIBRATION_OFFSET_MAX_PA,
+        CALIBRATION_GAIN_MIN_PPM - 50_000..=CALIBRATION_GAIN_MAX_PPM + 50_000,
+    )
+        .prop_map(|(offset_pa, gain_ppm)| SensorCalibration {
+            offset_pa,
+            gain_ppm,
+        });
+    (sensor.clone(), sensor).prop_map(|(positive, negative)| {
+        HostMsg::SetCalibration(Calibration { positive, negative })
+    })
 }
 
 fn sensor_reading() -> impl Strategy<Value = Result<i32, SensorError>> {
@@ -1136,14 +1168,48 @@ fn run_scenario(events: &[Event], config: Config) -> Result<Bench, TestCaseError
         last_state: ArmState::Disarmed,
         clear_seen: false,
     };
+    // The board's flash page, written after each frame as the board does.
+    let mut page = RamPage::default();
     for e in events {
         match e {
             Event::Frame(msg) => {
+                let state_before = b.ctl.state();
+                let calibration_before = b.ctl.calibration_report().calibration;
                 let replies = b.send(*msg);
-                if matches!(msg, HostMsg::ClearFaults { .. })
-                    && replies.iter().any(|r| matches!(r, McuMsg::Ack { .. }))
-                {
+                let acked = replies.iter().any(|r| matches!(r, McuMsg::Ack { .. }));
+                if matches!(msg, HostMsg::ClearFaults { .. }) && acked {
                     obs.clear_seen = true;
+                }
+                // A calibration changes only by an accepted SetCalibration,
+                // only while disarmed, and only to a plausible one.
+                let calibration = b.ctl.calibration_report().calibration;
+                if let HostMsg::SetCalibration(asked) = msg {
+                    // (A frame spoiled by noise before it gets no reply.)
+                    if !replies.is_empty() {
+                        prop_assert_eq!(
+                            acked,
+                            state_before == ArmState::Disarmed && asked.check().is_ok()
+                        );
+                    }
+                    if acked {
+                        prop_assert_eq!(calibration, *asked);
+                    }
+                }
+                if calibration != calibration_before {
+                    prop_assert!(matches!(msg, HostMsg::SetCalibration(_)) && acked);
+                }
+                prop_assert!(calibration.check().is_ok());
+                // Flash is written only while not armed with the pumps off.
+                let (state, pumps) = (b.ctl.state(), b.rig.pumps);
+                let pending = b.ctl.calibration_write_pending();
+                let wrote = b.ctl.store_calibration(&mut page);
+                prop_assert_eq!(wrote.is_some(), pending);
+                if wrote.is_some() {
+                    prop_assert!(state != ArmState::Armed && pumps == PumpOutputs::OFF);
+                    prop_assert_eq!(
+                        crate::calibration::decode(&page.bytes).calibration,
+                        Some(calibration)
+                    );
                 }
             }
             Event::Noise(bytes) => {
@@ -1719,5 +1785,398 @@ proptest! {
         let mut all = if charge_first { charged_start() } else { Vec::new() };
         all.extend(events);
         run_physical(&phys, &all)?;
+    }
+}
+
+// -------------------------------------------------------------- calibration
+
+fn sensor(offset_pa: i32, gain_ppm: u32) -> SensorCalibration {
+    SensorCalibration {
+        offset_pa,
+        gain_ppm,
+    }
+}
+
+fn a_calibration() -> Calibration {
+    Calibration {
+        positive: sensor(1_500, 1_050_000),
+        negative: sensor(-2_000, 960_000),
+    }
+}
+
+fn hello(b: &mut Bench) -> dexitac_protocol::HelloReply {
+    let replies = b.send(HostMsg::Hello);
+    let [McuMsg::HelloReply(h)] = replies[..] else {
+        panic!("{replies:?}")
+    };
+    h
+}
+
+#[test]
+fn calibration_is_accepted_disarmed_applied_stored_and_reported() {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.boot();
+    b.ack(HostMsg::SetCalibration(a_calibration()));
+    let report = hello(&mut b).calibration;
+    assert_eq!(report.calibration, a_calibration());
+    assert_eq!(report.source, CalibrationSource::Host);
+    assert_eq!(report.record, CalibrationRecord::WritePending);
+    // The board stores it after the frame; an unchanged one is not written again.
+    let mut page = RamPage::default();
+    assert_eq!(
+        b.ctl.store_calibration(&mut page),
+        Some(CalibrationRecord::Valid {
+            version: RECORD_VERSION
+        })
+    );
+    assert_eq!(b.ctl.store_calibration(&mut page), None, "nothing pending");
+    b.ack(HostMsg::SetCalibration(a_calibration()));
+    b.ctl.store_calibration(&mut page);
+    assert_eq!(page.writes, 1);
+    let report = hello(&mut b).calibration;
+    assert_eq!(
+        report.record,
+        CalibrationRecord::Valid {
+            version: RECORD_VERSION
+        }
+    );
+    // After a reset the board reads the page: the same calibration, from flash.
+    let mut after = Bench::new(Rig::fixed(0, 0));
+    after.ctl =
+        Controller::new(Config::default(), ResetCause::Pin).with_calibration_record(&page.bytes);
+    let report = hello(&mut after).calibration;
+    assert_eq!(report.calibration, a_calibration());
+    assert_eq!(report.source, CalibrationSource::Flash);
+}
+
+#[test]
+fn calibration_is_refused_while_armed_or_tripped_and_when_implausible() {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.arm();
+    b.nack(
+        HostMsg::SetCalibration(a_calibration()),
+        NackReason::Refused,
+    );
+    b.ack(HostMsg::Disarm);
+    b.ctl.report_fault(Fault::ClockFallback);
+    b.tick();
+    assert_eq!(b.ctl.state(), ArmState::Tripped);
+    b.nack(
+        HostMsg::SetCalibration(a_calibration()),
+        NackReason::Tripped,
+    );
+    b.ack(clear(&[Fault::ClockFallback]));
+    for implausible in [
+        Calibration {
+            positive: sensor(CALIBRATION_OFFSET_MAX_PA + 1, GAIN_UNITY_PPM),
+            ..a_calibration()
+        },
+        Calibration {
+            negative: sensor(0, CALIBRATION_GAIN_MIN_PPM - 1),
+            ..a_calibration()
+        },
+        Calibration {
+            negative: sensor(0, CALIBRATION_GAIN_MAX_PPM + 1),
+            ..a_calibration()
+        },
+        Calibration {
+            positive: sensor(i32::MIN, 0),
+            negative: sensor(i32::MAX, u32::MAX),
+        },
+    ] {
+        b.nack(
+            HostMsg::SetCalibration(implausible),
+            NackReason::Implausible,
+        );
+    }
+    // Nothing was applied, nothing waits for the store.
+    let report = hello(&mut b).calibration;
+    assert_eq!(report.calibration, Calibration::IDENTITY);
+    assert_eq!(report.source, CalibrationSource::Default);
+    assert!(!b.ctl.calibration_write_pending());
+    // The limits themselves are accepted.
+    b.ack(HostMsg::SetCalibration(Calibration {
+        positive: sensor(CALIBRATION_OFFSET_MAX_PA, CALIBRATION_GAIN_MAX_PPM),
+        negative: sensor(-CALIBRATION_OFFSET_MAX_PA, CALIBRATION_GAIN_MIN_PPM),
+    }));
+}
+
+#[test]
+fn arm_waits_until_a_new_calibration_is_stored() {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.boot();
+    // Calibration and Arm in one chunk of bytes: the store has not run.
+    let mut bytes = EncodedFrame::new(1, &HostMsg::SetCalibration(a_calibration()))
+        .unwrap()
+        .to_vec();
+    bytes.extend_from_slice(&EncodedFrame::new(2, &HostMsg::Arm).unwrap());
+    b.ctl.receive(&bytes, &b.rig, &mut b.tx);
+    assert_eq!(
+        b.drain(),
+        [
+            McuMsg::Ack { seq: 1 },
+            McuMsg::Nack {
+                seq: 2,
+                reason: NackReason::Refused
+            }
+        ]
+    );
+    assert_eq!(b.ctl.state(), ArmState::Disarmed);
+    // Whatever the store says, the calibration applies; then arming works.
+    assert_eq!(
+        b.ctl.store_calibration(&mut NoStore),
+        Some(CalibrationRecord::NotPersisted)
+    );
+    b.ack(HostMsg::Arm);
+    assert_eq!(
+        hello(&mut b).calibration.calibration,
+        a_calibration(),
+        "applied even if not persisted"
+    );
+}
+
+#[test]
+fn a_failed_write_is_reported_and_the_calibration_still_applies() {
+    struct Broken;
+    impl crate::calibration::CalibrationStore for Broken {
+        fn write_record(
+            &mut self,
+            _: &[u8; RECORD_LEN],
+        ) -> Result<(), crate::calibration::StoreError> {
+            Err(crate::calibration::StoreError::Failed)
+        }
+    }
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.boot();
+    b.ack(HostMsg::SetCalibration(a_calibration()));
+    assert_eq!(
+        b.ctl.store_calibration(&mut Broken),
+        Some(CalibrationRecord::WriteFailed)
+    );
+    let report = hello(&mut b).calibration;
+    assert_eq!(report.record, CalibrationRecord::WriteFailed);
+    assert_eq!(report.calibration, a_calibration());
+}
+
+#[test]
+fn a_bad_record_at_boot_is_ignored_and_reported() {
+    let good = crate::calibration::encode(&a_calibration());
+    let mut bad_crc = good;
+    bad_crc[10] ^= 0x01;
+    let mut other_version = good;
+    other_version[4] = 9;
+    let crc = crc::Crc::<u32>::new(&crc::CRC_32_ISCSI).checksum(&other_version[..24]);
+    other_version[24..].copy_from_slice(&crc.to_le_bytes());
+    for (page, record) in [
+        (&bad_crc[..], CalibrationRecord::BadCrc),
+        (
+            &other_version[..],
+            CalibrationRecord::UnknownVersion { version: 9 },
+        ),
+        (&[0xFF; 1024][..], CalibrationRecord::Empty),
+        (&[0x00; 1024][..], CalibrationRecord::NotARecord),
+    ] {
+        let mut b = Bench::new(Rig::fixed(0, 0));
+        b.rig.offset_pa = (1_500, -2_000);
+        b.ctl =
+            Controller::new(Config::default(), ResetCause::PowerOn).with_calibration_record(page);
+        b.boot();
+        let report = hello(&mut b).calibration;
+        assert_eq!(report.record, record);
+        assert_eq!(report.source, CalibrationSource::Default);
+        assert_eq!(report.calibration, Calibration::IDENTITY);
+        // Defaults: the boot zero alone.
+        assert_eq!(report.positive_zero.source, ZeroSource::Boot);
+        assert!((report.positive_zero.zero_pa - 1_500).abs() < 300);
+    }
+}
+
+/// The true pressure at which `tank` trips over its limit when it ramps
+/// toward it by `step_pa` a millisecond from `start_pa`, on a sensor with
+/// `gain_ppm` gain error, with `calibration` set before the ramp (and the
+/// tanks at atmosphere for the boot zero).
+fn true_trip_pa(
+    positive: bool,
+    sensor_gain_ppm: u32,
+    calibration: Option<Calibration>,
+    start_pa: i32,
+    step_pa: i32,
+) -> i32 {
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    if positive {
+        b.rig.gain_ppm.0 = sensor_gain_ppm;
+    } else {
+        b.rig.gain_ppm.1 = sensor_gain_ppm;
+    }
+    b.boot();
+    if let Some(c) = calibration {
+        b.ack(HostMsg::SetCalibration(c));
+    }
+    let mut pa = start_pa;
+    for _ in 0..20_000 {
+        b.rig.source = if positive {
+            Source::Fixed(Ok(pa), Ok(0))
+        } else {
+            Source::Fixed(Ok(0), Ok(pa))
+        };
+        if !faults_of(&b.tick()).is_empty() {
+            let want = if positive {
+                Fault::PositiveOverLimit
+            } else {
+                Fault::NegativeOverLimit
+            };
+            assert_eq!(b.ctl.faults(), FaultFlags::NONE.with(want));
+            return pa;
+        }
+        pa += step_pa;
+    }
+    panic!("no trip up to {pa} Pa");
+}
+
+#[test]
+fn a_calibrated_gain_moves_the_trip_to_the_true_limit() {
+    // A positive sensor that reads 1/1.05 of the true pressure: without
+    // calibration the tank trips only at 52.5 kPa (true); with gain 1.05 at
+    // the limit, 50 kPa. Tolerances: the ramp's filter lag (5 Pa/ms, about
+    // 10 ms) and the ADC's resolution (one count is about 120 Pa, in the
+    // reading and in the boot zero).
+    let low = 952_381;
+    let gain = Calibration {
+        positive: sensor(0, 1_050_000),
+        negative: SensorCalibration::IDENTITY,
+    };
+    let uncalibrated = true_trip_pa(true, low, None, 45_000, 5);
+    let calibrated = true_trip_pa(true, low, Some(gain), 45_000, 5);
+    assert!(
+        (52_400..=52_900).contains(&uncalibrated),
+        "uncalibrated: {uncalibrated}"
+    );
+    assert!(
+        (POSITIVE_TANK_MAX_PA - 250..=POSITIVE_TANK_MAX_PA + 400).contains(&calibrated),
+        "calibrated: {calibrated}"
+    );
+    // The same on the negative side: a sensor reading 4 % high trips early
+    // (-54.8 kPa) until gain 0.96 puts the trip back at -57 kPa.
+    let high = 1_040_000;
+    let gain = Calibration {
+        positive: SensorCalibration::IDENTITY,
+        negative: sensor(0, 961_538),
+    };
+    let uncalibrated = true_trip_pa(false, high, None, -50_000, -5);
+    let calibrated = true_trip_pa(false, high, Some(gain), -50_000, -5);
+    assert!(
+        (-55_100..=-54_700).contains(&uncalibrated),
+        "uncalibrated: {uncalibrated}"
+    );
+    assert!(
+        (NEGATIVE_TANK_MIN_PA - 400..=NEGATIVE_TANK_MIN_PA + 250).contains(&calibrated),
+        "calibrated: {calibrated}"
+    );
+}
+
+#[test]
+fn the_stored_offset_stands_in_when_a_tank_is_under_pressure_at_boot() {
+    // A sensor with a +5 kPa zero error on a tank still at 20 kPa after a
+    // reset: the boot zero cannot be atmosphere. Without a calibration the
+    // reading is 5 kPa high; with the stored offset it is right.
+    let stored = Calibration {
+        positive: sensor(5_000, GAIN_UNITY_PPM),
+        negative: SensorCalibration::IDENTITY,
+    };
+    let page = crate::calibration::encode(&stored);
+    for (record, want_pa, want_source) in [
+        (None, 25_000, ZeroSource::Offset),
+        (Some(&page[..]), 20_000, ZeroSource::Offset),
+    ] {
+        let mut b = Bench::new(Rig::fixed(20_000, 0));
+        b.rig.offset_pa = (5_000, 0);
+        if let Some(page) = record {
+            b.ctl = Controller::new(Config::default(), ResetCause::IndependentWatchdog)
+                .with_calibration_record(page);
+        }
+        b.boot();
+        let reading = b.ctl.readings().0.unwrap();
+        assert!((reading - want_pa).abs() < 300, "{reading} vs {want_pa}");
+        assert_eq!(hello(&mut b).calibration.positive_zero.source, want_source);
+    }
+}
+
+#[test]
+fn the_stored_offset_centres_the_boot_zero_window() {
+    // A sensor with a 7 kPa zero error at atmosphere: outside the ±4 kPa
+    // window around 0, so uncalibrated it reads 7 kPa high; a stored
+    // offset of 6 kPa brings the boot zero (7 kPa, measured) into the
+    // window, and the boot zero, not the offset, applies.
+    let stored = Calibration {
+        positive: sensor(6_000, GAIN_UNITY_PPM),
+        negative: SensorCalibration::IDENTITY,
+    };
+    let page = crate::calibration::encode(&stored);
+    for (record, want_pa, want_source) in [
+        (None, 7_000, ZeroSource::Offset),
+        (Some(&page[..]), 0, ZeroSource::Boot),
+    ] {
+        let mut b = Bench::new(Rig::fixed(0, 0));
+        b.rig.offset_pa = (7_000, 0);
+        if let Some(page) = record {
+            b.ctl = Controller::new(Config::default(), ResetCause::PowerOn)
+                .with_calibration_record(page);
+        }
+        b.boot();
+        let reading = b.ctl.readings().0.unwrap();
+        assert!((reading - want_pa).abs() < 300, "{reading} vs {want_pa}");
+        let zero = hello(&mut b).calibration.positive_zero;
+        assert_eq!(zero.source, want_source);
+    }
+}
+
+#[test]
+fn a_calibration_set_while_running_is_judged_against_the_boot_reading() {
+    // Booted at atmosphere with a 7 kPa sensor error: the boot zero is
+    // outside the window, so 0 Pa applies and the reading is 7 kPa high.
+    // Setting the offset to 6 kPa brings the measured 7 kPa into the
+    // window at once.
+    let mut b = Bench::new(Rig::fixed(0, 0));
+    b.rig.offset_pa = (7_000, 0);
+    b.boot();
+    assert!((b.ctl.readings().0.unwrap() - 7_000).abs() < 300);
+    b.ack(HostMsg::SetCalibration(Calibration {
+        positive: sensor(6_000, GAIN_UNITY_PPM),
+        negative: SensorCalibration::IDENTITY,
+    }));
+    assert!(b.ctl.readings().0.unwrap().abs() < 300);
+    b.ticks(5);
+    assert!(b.ctl.readings().0.unwrap().abs() < 300);
+    assert_eq!(
+        hello(&mut b).calibration.positive_zero.source,
+        ZeroSource::Boot
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases_or(24), ..ProptestConfig::default() })]
+
+    /// For any plausible gain error of the positive sensor, the matching
+    /// calibration puts the trip at the true limit (within the ramp's lag
+    /// and two ADC counts), whatever offset the calibration carries within
+    /// the boot zero's window (the boot zero applies).
+    #[test]
+    fn the_matching_gain_trips_at_the_true_limit(
+        gain_ppm in CALIBRATION_GAIN_MIN_PPM..=CALIBRATION_GAIN_MAX_PPM,
+        offset_pa in -3_000i32..=3_000,
+    ) {
+        let sensor_gain = u32::try_from(
+            u64::from(GAIN_UNITY_PPM) * u64::from(GAIN_UNITY_PPM) / u64::from(gain_ppm),
+        )
+        .unwrap();
+        let calibration = Calibration {
+            positive: sensor(offset_pa, gain_ppm),
+            negative: SensorCalibration::IDENTITY,
+        };
+        let trip = true_trip_pa(true, sensor_gain, Some(calibration), 47_000, 5);
+        prop_assert!(
+            (POSITIVE_TANK_MAX_PA - 250..=POSITIVE_TANK_MAX_PA + 400).contains(&trip),
+            "gain {} ppm: trip at {} Pa", gain_ppm, trip
+        );
     }
 }

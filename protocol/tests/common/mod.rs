@@ -40,7 +40,70 @@ pub fn host_msg() -> impl Strategy<Value = HostMsg> {
         any::<u16>().prop_map(|interval_ms| HostMsg::SetTelemetryInterval { interval_ms }),
         Just(HostMsg::Heartbeat),
         fault_flags().prop_map(|faults| HostMsg::ClearFaults { faults }),
+        calibration().prop_map(HostMsg::SetCalibration),
     ]
+}
+
+/// Any values, plausible or not: every calibration must travel intact.
+pub fn sensor_calibration() -> impl Strategy<Value = SensorCalibration> {
+    (any::<i32>(), any::<u32>()).prop_map(|(offset_pa, gain_ppm)| SensorCalibration {
+        offset_pa,
+        gain_ppm,
+    })
+}
+
+pub fn calibration() -> impl Strategy<Value = Calibration> {
+    (sensor_calibration(), sensor_calibration())
+        .prop_map(|(positive, negative)| Calibration { positive, negative })
+}
+
+pub fn calibration_record() -> impl Strategy<Value = CalibrationRecord> {
+    prop_oneof![
+        Just(CalibrationRecord::NotPersisted),
+        Just(CalibrationRecord::Empty),
+        any::<u16>().prop_map(|version| CalibrationRecord::Valid { version }),
+        Just(CalibrationRecord::BadCrc),
+        any::<u16>().prop_map(|version| CalibrationRecord::UnknownVersion { version }),
+        Just(CalibrationRecord::NotARecord),
+        any::<u16>().prop_map(|version| CalibrationRecord::Implausible { version }),
+        Just(CalibrationRecord::WritePending),
+        Just(CalibrationRecord::WriteFailed),
+    ]
+}
+
+pub fn active_zero() -> impl Strategy<Value = ActiveZero> {
+    (
+        any::<i32>(),
+        prop_oneof![
+            Just(ZeroSource::Pending),
+            Just(ZeroSource::Boot),
+            Just(ZeroSource::Offset)
+        ],
+    )
+        .prop_map(|(zero_pa, source)| ActiveZero { zero_pa, source })
+}
+
+pub fn calibration_report() -> impl Strategy<Value = CalibrationReport> {
+    (
+        calibration(),
+        prop_oneof![
+            Just(CalibrationSource::Default),
+            Just(CalibrationSource::Flash),
+            Just(CalibrationSource::Host)
+        ],
+        calibration_record(),
+        active_zero(),
+        active_zero(),
+    )
+        .prop_map(
+            |(calibration, source, record, positive_zero, negative_zero)| CalibrationReport {
+                calibration,
+                source,
+                record,
+                positive_zero,
+                negative_zero,
+            },
+        )
 }
 
 pub fn fault_flags() -> impl Strategy<Value = FaultFlags> {
@@ -78,6 +141,7 @@ pub fn nack_reason() -> impl Strategy<Value = NackReason> {
         Just(NackReason::Refused),
         Just(NackReason::GuardBand),
         Just(NackReason::IntervalTooShort),
+        Just(NackReason::Implausible),
     ]
 }
 
@@ -127,7 +191,12 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
             any::<i32>(),
             any::<u8>(),
             reset_cause(),
-            (fault_flags(), last_stop(), any::<u16>()),
+            (
+                fault_flags(),
+                last_stop(),
+                any::<u16>(),
+                calibration_report(),
+            ),
         )
             .prop_map(
                 |(
@@ -137,7 +206,7 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
                     n,
                     c,
                     reset_cause,
-                    (latched_faults, last_stop, min_telemetry_interval_ms),
+                    (latched_faults, last_stop, min_telemetry_interval_ms, calibration),
                 )| {
                     McuMsg::HelloReply(HelloReply {
                         protocol_version,
@@ -153,6 +222,7 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
                         latched_faults,
                         last_stop,
                         min_telemetry_interval_ms,
+                        calibration,
                     })
                 }
             ),
@@ -173,4 +243,113 @@ pub fn mcu_msg() -> impl Strategy<Value = McuMsg> {
 /// Decodes every frame in `bytes` with a fresh decoder.
 pub fn decode_all<M: Message>(bytes: &[u8]) -> Vec<Result<Frame<M>, FrameError>> {
     Decoder::<M>::new().feed(bytes).collect()
+}
+
+fn example_targets() -> TankTargets {
+    TankTargets::new(35_000, -40_000).expect("inside limits")
+}
+
+fn example_telemetry() -> Telemetry {
+    let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
+    chambers[1] = ValveState::Inflate;
+    chambers[6] = ValveState::Deflate;
+    Telemetry {
+        time_ms: 123_456,
+        positive_tank_pa: 35_012,
+        negative_tank_pa: -39_950,
+        chambers,
+        positive_pump_on: true,
+        negative_pump_on: false,
+        state: ArmState::Armed,
+        faults: FaultFlags::NONE.with(Fault::HostSilence),
+        loop_overruns: 3,
+    }
+}
+
+/// A plausible calibration: +1.2 kPa / x1.05 and -0.8 kPa / x0.98.
+pub fn example_calibration() -> Calibration {
+    Calibration {
+        positive: SensorCalibration {
+            offset_pa: 1_200,
+            gain_ppm: 1_050_000,
+        },
+        negative: SensorCalibration {
+            offset_pa: -800,
+            gain_ppm: 980_000,
+        },
+    }
+}
+
+/// One instance of every HostMsg variant, in wire order (the wire
+/// snapshots and the fuzz seeds).
+pub fn host_examples() -> Vec<HostMsg> {
+    let mut chambers = [ValveState::Hold; CHAMBER_COUNT];
+    chambers[0] = ValveState::Inflate;
+    chambers[7] = ValveState::Deflate;
+    vec![
+        HostMsg::Hello,
+        HostMsg::Ping { nonce: 0xdead_beef },
+        HostMsg::SetChambers { chambers },
+        HostMsg::SealAll,
+        HostMsg::VentAll,
+        HostMsg::SetPumps {
+            positive: PumpMode::Regulate,
+            negative: PumpMode::Off,
+        },
+        HostMsg::SetTankTargets(example_targets()),
+        HostMsg::Arm,
+        HostMsg::Disarm,
+        HostMsg::SetTelemetryInterval { interval_ms: 20 },
+        HostMsg::Heartbeat,
+        HostMsg::ClearFaults {
+            faults: FaultFlags::NONE.with(Fault::HostSilence),
+        },
+        HostMsg::SetCalibration(example_calibration()),
+    ]
+}
+
+/// One instance of every McuMsg variant, in wire order.
+pub fn mcu_examples() -> Vec<McuMsg> {
+    vec![
+        McuMsg::HelloReply(HelloReply {
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: FirmwareVersion {
+                major: 0,
+                minor: 1,
+                patch: 2,
+            },
+            positive_tank_max_pa: POSITIVE_TANK_MAX_PA,
+            negative_tank_min_pa: NEGATIVE_TANK_MIN_PA,
+            chamber_count: CHAMBER_COUNT as u8,
+            reset_cause: ResetCause::IndependentWatchdog,
+            latched_faults: FaultFlags::NONE.with(Fault::PositiveOverLimit),
+            last_stop: LastStop::Panic { line: 300 },
+            min_telemetry_interval_ms: 8,
+            calibration: CalibrationReport {
+                calibration: example_calibration(),
+                source: CalibrationSource::Flash,
+                record: CalibrationRecord::Valid { version: 1 },
+                positive_zero: ActiveZero {
+                    zero_pa: 1_450,
+                    source: ZeroSource::Boot,
+                },
+                negative_zero: ActiveZero {
+                    zero_pa: -800,
+                    source: ZeroSource::Offset,
+                },
+            },
+        }),
+        McuMsg::Ack { seq: 513 },
+        McuMsg::Nack {
+            seq: 7,
+            reason: NackReason::Tripped,
+        },
+        McuMsg::Telemetry(example_telemetry()),
+        McuMsg::Fault(FaultEvent {
+            time_ms: 42,
+            fault: Fault::PositiveOverLimit,
+            positive_tank_pa: 50_100,
+            negative_tank_pa: -1_000,
+        }),
+    ]
 }
