@@ -137,6 +137,44 @@ def shear_set(src: Source, name: str, rel: str, n: int, seed: int, out: Path, me
     print(f"{name}: {len(out_rows)} of {len(rows)} frames")
 
 
+def write_pins(path: Path, pts) -> None:
+    write_labels(path, ["x", "y"], [[f"{x:.2f}", f"{y:.2f}"] for x, y in pts])
+
+
+def raw_pins(grey):
+    """The pins of the raw TacTip frame, by a manual-parameter detector checked
+    by eye on an overlay: white top-hat (15 px disc) > 40, regions of at least
+    40 px, centroid within 180 px of the pin disc's centre (303, 257), which
+    leaves out the LED reflections and specks on the rim and the housing.
+    Finds 331 (a top-hat level of 30 or 50 also gives 331)."""
+    import cv2
+    import numpy as np
+
+    th = cv2.morphologyEx(grey, cv2.MORPH_TOPHAT, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (15, 15)))
+    _, _, st, cen = cv2.connectedComponentsWithStats((th > 40).astype(np.uint8))
+    a, c = st[1:, cv2.CC_STAT_AREA], cen[1:]
+    return c[(a >= 40) & (np.hypot(c[:, 0] - 303, c[:, 1] - 257) < 180)]
+
+
+def gelslim_dots(bgr):
+    """The dots of the GelSlim ref frame, by a manual-parameter detector checked
+    by eye on overlays: grey minus its Gaussian blur (sigma 8 px) darker than
+    8 levels, 3x3 closing, regions of at least 6 px; the two slivers on the top
+    edge (centroid within 2 px of it, dots of the row above the frame) are
+    dropped. Finds 261: 14 rows (5 of 18 dots, 9 of 19; row by row linking of
+    right-hand neighbours), i.e. the 14 x 19 lattice less the 5 top-right dots
+    whose centres lie just outside the frame."""
+    import cv2
+    import numpy as np
+
+    g = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    d = cv2.GaussianBlur(g, (0, 0), 8) - g
+    m = cv2.morphologyEx((d > 8).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    _, _, st, cen = cv2.connectedComponentsWithStats(m)
+    a, c = st[1:, cv2.CC_STAT_AREA], cen[1:]
+    return c[(a >= 6) & (c[:, 1] >= 2.0)]
+
+
 def ball_centre(img, ref) -> tuple[float, float, int]:
     """The ball imprint of a GelSlim press: centroid of the largest region whose
     shading differs from the reference (summed |RGB| difference of the
@@ -197,6 +235,11 @@ def main() -> None:
     (d / "frames" / "raw_tactile_image.png").write_bytes(raw)
     (d / "rest.png").write_bytes(raw)
     write_labels(d / "labels.csv", ["frame"], [["raw_tactile_image"]])
+    import cv2
+    import numpy as np
+
+    pins = raw_pins(cv2.imdecode(np.frombuffer(raw, np.uint8), cv2.IMREAD_GRAYSCALE))
+    write_pins(d / "pins_ref.csv", pins)
     write_set(d, {
         "name": "tactip_raw",
         "source": f"{TIP_URL} {RAW_FRAME}",
@@ -204,14 +247,15 @@ def main() -> None:
         "size": "640x480 RGB",
         "frames": 1,
         "pin_count": TACTIP_PINS,
-        "pin_count_how": "nominal skin pin count (331); the repo's own doh_detection.png "
-        "marks the pins of this frame",
+        "pin_count_how": "nominal skin pin count (331); a manual-parameter detector finds "
+        "331 pins in this frame (pins_ref.csv, checked by eye, layout.py raw_pins)",
+        "pins_ref": "pins_ref.csv: the 331 pin centres of the frame (layout.py raw_pins)",
         "rest": "rest.png (the frame itself: a pin count test, no contact)",
         "regress_on": [],
         "notes": "One raw camera frame: bright pins in a dark disc, bright white housing "
         "around it, LED reflections on the rim. Tests detection on a frame with housing.",
     })
-    print("tactip_raw: 1 frame")
+    print(f"tactip_raw: 1 frame, {len(pins)} reference pins")
 
     gs = Source(args.gelslim)
     d = fresh_dir(out / "gelslim_dots")
@@ -233,6 +277,8 @@ def main() -> None:
         to_png(f"{DOTS_DIR}/{n}", d / "frames" / (n[:-4] + ".png"))
     rows = [["ref", 0, "nan", "nan", 0]]
     ref = cv2.imread(str(d / "rest.png"))
+    dots = gelslim_dots(ref)
+    write_pins(d / "pins_ref.csv", dots)
     for n in names:
         bx, by, area = ball_centre(cv2.imread(str(d / "frames" / (n[:-4] + ".png"))), ref)
         rows.append([n[:-4], 1, f"{bx:.2f}", f"{by:.2f}", area])
@@ -247,6 +293,7 @@ def main() -> None:
         "pin_count_how": "counted on ref.jpg (eval/README.md): 14 rows x 19 columns of dots "
         "whose centre lies in the frame, less 5 at the top right whose centre lies just "
         "outside it = 261; 18 of them are half cut by the left and right edges",
+        "pins_ref": "pins_ref.csv: the 261 dot centres of ref (layout.py gelslim_dots)",
         "rest": "rest.png = ref.jpg (no contact); ref is also frame 'ref'",
         "regress_on": ["ball_x_px", "ball_y_px"],
         "centre_label": ["ball_x_px", "ball_y_px"],
@@ -259,7 +306,7 @@ def main() -> None:
         "sample_* are presses of a ball (a shading calibration set). The source gives no "
         "position label: the ball centre above is derived from the image shading.",
     })
-    print(f"gelslim_dots: {len(rows)} frames")
+    print(f"gelslim_dots: {len(rows)} frames, {len(dots)} reference dots on ref")
 
 
 if __name__ == "__main__":

@@ -159,6 +159,55 @@ def run_baseline(kind: str, set_dir: Path, rest: Path, pitch: float, out_dir: Pa
     return [{k: str(v) for k, v in r.items()} for r in rows], wall
 
 
+def rest_markers(exe: str, tool: str, set_name: str, rest: Path, out_dir: Path,
+                 config: Path | None) -> np.ndarray:
+    """The markers a tool finds on the rest frame itself (input px)."""
+    if tool.startswith("dexitac"):
+        mdir = out_dir / f"rest_markers_{tool.split()[1]}"
+        shutil.rmtree(mdir, ignore_errors=True)
+        cmd = [exe, "analyze", "-q", "--rest", str(rest), "--out", str(out_dir / "rest_only.csv"),
+               "--markers-out", str(mdir)]
+        if config:
+            cmd += ["--config", str(config)]
+        subprocess.run(cmd + [str(rest)], capture_output=True, text=True)
+        files = list(mdir.glob("*.csv"))
+        if not files:
+            return np.zeros((0, 2))
+        return np.loadtxt(files[0], delimiter=",", skiprows=1, ndmin=2).reshape(-1, 2)
+    img = cv2.imread(str(rest), cv2.IMREAD_UNCHANGED)
+    make = baselines.make_opencv(baselines.OPENCV_PARAMS[set_name]) if tool == "opencv" \
+        else baselines.make_doh(baselines.DOH_PARAMS[set_name])
+    return make(img)
+
+
+def position_check(ref: np.ndarray, pts: np.ndarray, pitch: float) -> dict:
+    """Markers against the reference pin centres: a pin is found when a marker
+    lies within 0.35 pitch of it; a marker is off-pin when no pin lies within
+    0.35 pitch, and beyond the pins when none lies within 1 pitch."""
+    tol = 0.35 * pitch
+    if len(pts) == 0:
+        return dict(n=0, found=0, off=0, beyond=0, beyond_at=[])
+    d_ref, _ = cKDTree(pts).query(ref)
+    d_pts, _ = cKDTree(ref).query(pts)
+    beyond = pts[d_pts > pitch]
+    return dict(n=len(pts), found=int((d_ref <= tol).sum()), off=int((d_pts > tol).sum()),
+                beyond=len(beyond), beyond_at=[(round(float(x)), round(float(y))) for x, y in beyond])
+
+
+def position_table(rows: list[dict]) -> str:
+    lines = ["| set | tool | markers on rest | pins found (of ref) | second markers on a found pin | off-pin markers | of which beyond the pins | where (beyond, px) |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        c = r["check"]
+        at = " ".join(f"({x},{y})" for x, y in c["beyond_at"][:12])
+        if len(c["beyond_at"]) > 12:
+            at += f" … {len(c['beyond_at']) - 12} more"
+        lines.append(f"| {r['set']} | {r['tool']} | {c['n']} | {c['found']}/{r['pins']} | "
+                     f"{max(0, c['n'] - c['off'] - c['found'])} | {c['off']} | "
+                     f"{c['beyond']} | {at} |")
+    return "\n".join(lines)
+
+
 # ---------------------------------------------------------------- metrics
 
 def loo_r2(y: np.ndarray, X: np.ndarray) -> float:
@@ -262,6 +311,7 @@ def main() -> None:
     up_before = sh(["uptime"])
     notes: dict = {}
     results = []
+    positions: list[dict] = []
     for s in a.sets:
         set_dir = a.data / s
         meta = json.loads((set_dir / "set.json").read_text())
@@ -282,6 +332,13 @@ def main() -> None:
             for kind in ("opencv", "doh"):
                 rows, wall = run_baseline(kind, set_dir, rest, pitch, out_dir)
                 results.append(dict(base, tool=kind, m=metrics(rows, labels, meta, wall)))
+            ref_csv = set_dir / "pins_ref.csv"
+            if ref_csv.exists() and rest_name == "rest.png":
+                ref = np.loadtxt(ref_csv, delimiter=",", skiprows=1, ndmin=2)
+                for tool in TOOLS:
+                    pts = rest_markers(exe, tool, s, rest, out_dir, cfg if tool == "dexitac tuned" else None)
+                    positions.append(dict(set=s, tool=tool, pins=len(ref),
+                                          check=position_check(ref, pts, pitch)))
             print(table([r for r in results if r["set"] == s and r["rest"] == rest_name]), file=sys.stderr)
     up_after = sh(["uptime"])
     lscpu = sh(["sh", "-c", "lscpu | grep -m1 'Model name' | sed 's/.*: *//'"])
@@ -298,6 +355,11 @@ def main() -> None:
           "cv2.setNumThreads(1) and OMP/OPENBLAS/MKL threads 1.",
           f"- Command: `python eval/run.py --dexitac {a.dexitac} --sets {' '.join(a.sets)}`", "",
           table(results), "",
+          "Rest frame against the reference pin centres (pins_ref.csv, sets that have one): "
+          "a pin is found when a marker lies within 0.35 pitch; second markers = markers near a pin "
+          "beyond one per found pin; off-pin = markers with no pin "
+          "within 0.35 pitch; beyond = no pin within 1 pitch (on the rim, housing or LEDs).", "",
+          position_table(positions) if positions else "(no set with pins_ref.csv)", "",
           "Columns: markers = per-frame marker count (median [min–max]) against the known pin "
           "count; ±1 %/±2 % = fraction of frames whose count is that close; contact frames = "
           "fraction of frames with a contact centre; R² = leave-one-out R² of a linear "
