@@ -83,8 +83,9 @@ OPENCV_PARAMS = {
                        filterByConvexity=True, minConvexity=0.8),
     # GelSlim: dark dots (~5 x 9 px) on a bright gel under coloured light.
     # Global thresholds meet an uneven, coloured background: a fine
-    # threshold step and loose shape filters; finds 261 on ref.png, of which
-    # 17 are not at a dot (21 dots missed) by the careful count's positions.
+    # threshold step and loose shape filters; on ref.png it finds 258
+    # markers, 241 of the 261 dots of pins_ref.csv, 12 markers off a dot
+    # (2026-11-23 run).
     "gelslim_dots": dict(minThreshold=30, maxThreshold=230, thresholdStep=2, minRepeatability=2,
                          filterByColor=True, blobColor=0,
                          filterByArea=True, minArea=8, maxArea=150,
@@ -104,9 +105,10 @@ DOH_PARAMS = {
     # Raw frame: pins of radius ~4 px; 0.012 finds 333 (0.01: 338, 0.015: 236).
     "tactip_raw": dict(min_sigma=3.0, max_sigma=5.0, num_sigma=5, threshold=0.012),
     # GelSlim dots are faint (~0.15 of full scale) on a bright gradient: the
-    # count swings from 615 to 146 between thresholds 0.0014 and 0.002;
-    # 0.0016 finds 262 on ref.png, but 63 of them are not at a dot (139 dots
-    # missed); 0.002 has no false ones but finds only 146.
+    # count swings from 615 to 146 between thresholds 0.0014 and 0.002.
+    # 0.0016 gives about the dot count on ref.png (259), but only 124 of the
+    # 261 dots are found (47 markers off a dot, 88 second markers on a dot;
+    # 2026-11-23 run); 0.002 has no off-dot markers but finds ~146.
     "gelslim_dots": dict(min_sigma=2.0, max_sigma=4.0, num_sigma=5, threshold=0.0016),
 }
 
