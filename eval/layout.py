@@ -132,6 +132,9 @@ def shear_set(src: Source, name: str, rel: str, n: int, seed: int, out: Path, me
         "shear_x/shear_y -> shear_*_mm, shear_Rz -> shear_rz_deg (targets_images.csv)",
         regress_on=["tilt_x_deg", "tilt_y_deg", "depth_mm"],
         rest=None,
+        pins_ref_rule="binary_cc: the pins of whichever rest frame eval/run.py uses are the "
+        "4-connected regions of white (> 127) pixels of 60-250 px (pins are ~120 px; "
+        "smaller specks and merged rim debris are left out)",
     )
     write_set(d, meta)
     print(f"{name}: {len(out_rows)} of {len(rows)} frames")

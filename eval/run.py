@@ -180,6 +180,21 @@ def rest_markers(exe: str, tool: str, set_name: str, rest: Path, out_dir: Path,
     return make(img)
 
 
+def reference_pins(set_dir: Path, meta: dict, rest_name: str, rest: Path) -> np.ndarray | None:
+    """Reference pin centres of the rest frame: pins_ref.csv for a set's own
+    rest.png, or (binarised TacTip sets, pins_ref_rule binary_cc) the
+    4-connected white regions of 60-250 px of whichever rest frame is used."""
+    ref_csv = set_dir / "pins_ref.csv"
+    if ref_csv.exists() and rest_name == "rest.png":
+        return np.loadtxt(ref_csv, delimiter=",", skiprows=1, ndmin=2)
+    if str(meta.get("pins_ref_rule", "")).startswith("binary_cc"):
+        g = cv2.imread(str(rest), cv2.IMREAD_GRAYSCALE)
+        _, _, st, cen = cv2.connectedComponentsWithStats((g > 127).astype(np.uint8), connectivity=4)
+        a = st[1:, cv2.CC_STAT_AREA]
+        return cen[1:][(a >= 60) & (a <= 250)]
+    return None
+
+
 def position_check(ref: np.ndarray, pts: np.ndarray, pitch: float) -> dict:
     """Markers against the reference pin centres: a pin is found when a marker
     lies within 0.35 pitch of it; a marker is off-pin when no pin lies within
@@ -195,14 +210,14 @@ def position_check(ref: np.ndarray, pts: np.ndarray, pitch: float) -> dict:
 
 
 def position_table(rows: list[dict]) -> str:
-    lines = ["| set | tool | markers on rest | pins found (of ref) | second markers on a found pin | off-pin markers | of which beyond the pins | where (beyond, px) |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| set | rest | tool | markers on rest | pins found (of ref) | second markers on a found pin | off-pin markers | of which beyond the pins | where (beyond, px) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         c = r["check"]
         at = " ".join(f"({x},{y})" for x, y in c["beyond_at"][:12])
         if len(c["beyond_at"]) > 12:
             at += f" … {len(c['beyond_at']) - 12} more"
-        lines.append(f"| {r['set']} | {r['tool']} | {c['n']} | {c['found']}/{r['pins']} | "
+        lines.append(f"| {r['set']} | {r['rest']} | {r['tool']} | {c['n']} | {c['found']}/{r['pins']} | "
                      f"{max(0, c['n'] - c['off'] - c['found'])} | {c['off']} | "
                      f"{c['beyond']} | {at} |")
     return "\n".join(lines)
@@ -332,12 +347,11 @@ def main() -> None:
             for kind in ("opencv", "doh"):
                 rows, wall = run_baseline(kind, set_dir, rest, pitch, out_dir)
                 results.append(dict(base, tool=kind, m=metrics(rows, labels, meta, wall)))
-            ref_csv = set_dir / "pins_ref.csv"
-            if ref_csv.exists() and rest_name == "rest.png":
-                ref = np.loadtxt(ref_csv, delimiter=",", skiprows=1, ndmin=2)
+            ref = reference_pins(set_dir, meta, rest_name, rest)
+            if ref is not None:
                 for tool in TOOLS:
                     pts = rest_markers(exe, tool, s, rest, out_dir, cfg if tool == "dexitac tuned" else None)
-                    positions.append(dict(set=s, tool=tool, pins=len(ref),
+                    positions.append(dict(set=s, rest=rest_name, tool=tool, pins=len(ref),
                                           check=position_check(ref, pts, pitch)))
             print(table([r for r in results if r["set"] == s and r["rest"] == rest_name]), file=sys.stderr)
     up_after = sh(["uptime"])
@@ -345,8 +359,7 @@ def main() -> None:
     md = [f"# Real frames: dexitac against OpenCV / scikit-image ({a.date})", "",
           f"- Machine: {lscpu or platform.processor()}, {os.cpu_count()} cores, "
           f"Python {platform.python_version()}, OpenCV {cv2.__version__}, "
-          f"scikit-image {baselines.blob_doh.__module__.split('.')[0]} "
-          f"{__import__('skimage').__version__}, numpy {np.__version__}",
+          f"scikit-image {__import__('skimage').__version__}, numpy {np.__version__}",
           f"- dexitac: `{a.dexitac}` ({sh([exe, '--version'])}); "
           f"`analyze --help` lists --rest-from-frames: {'yes' if rest_from_frames else 'no'} "
           "(rest frames for sets without rest.png are made by this runner)",
@@ -355,7 +368,8 @@ def main() -> None:
           "cv2.setNumThreads(1) and OMP/OPENBLAS/MKL threads 1.",
           f"- Command: `python eval/run.py --dexitac {a.dexitac} --sets {' '.join(a.sets)}`", "",
           table(results), "",
-          "Rest frame against the reference pin centres (pins_ref.csv, sets that have one): "
+          "Rest frame against reference pin centres (pins_ref.csv of the set's rest.png; for the "
+          "binarised TacTip sets the 4-connected white regions of 60-250 px of the rest frame used): "
           "a pin is found when a marker lies within 0.35 pitch; second markers = markers near a pin "
           "beyond one per found pin; off-pin = markers with no pin "
           "within 0.35 pitch; beyond = no pin within 1 pitch (on the rim, housing or LEDs).", "",
