@@ -270,6 +270,9 @@ def metrics(rows: list[dict], labels: list[dict], meta: dict, wall_s: float) -> 
         ok = has & np.isfinite(L).all(axis=1)
         if ok.any():
             m["err_med"] = float(np.median(np.hypot(cx[ok] - L[ok, 0], cy[ok] - L[ok, 1])))
+    for key, col in (("t_det", "t_detect_ms"), ("t_kde", "t_kde_ms"),
+                     ("t_cen", "t_segment_ms" if "t_segment_ms" in rows[0] else "t_centre_ms")):
+        m[key] = float(np.median([fnum(r.get(col)) for r in rows]))
     t = np.array([fnum(r["t_total_ms"]) for r in rows])
     m.update(t_med=float(np.median(t)), t_p95=float(np.percentile(t, 95)),
              wall_ms=wall_s * 1e3 / len(rows))
@@ -302,6 +305,16 @@ def table(results: list[dict]) -> str:
             f"{fmt(m.get('in1'), '.0%')} | {fmt(m.get('in2'), '.0%')} | {contact} | "
             f"{fmt(m.get('r2x'))} | {fmt(m.get('r2y'))} | {fmt(m.get('err_med'), '.1f')} | {fmt(m.get('t_med'))} | "
             f"{fmt(m.get('t_p95'))} | {fmt(m.get('wall_ms'))} | {r.get('note', '')} |")
+    return "\n".join(lines)
+
+
+def stage_table(results: list[dict]) -> str:
+    lines = ["| set | rest | tool | detect ms | density ms | region + centre ms | total ms |",
+             "|---|---|---|---|---|---|---|"]
+    for r in results:
+        m = r["m"]
+        lines.append(f"| {r['set']} | {r['rest']} | {r['tool']} | {fmt(m.get('t_det'))} | "
+                     f"{fmt(m.get('t_kde'))} | {fmt(m.get('t_cen'))} | {fmt(m.get('t_med'))} |")
     return "\n".join(lines)
 
 
@@ -384,6 +397,9 @@ def main() -> None:
           "pipeline; baselines: perf_counter around detection + density + centre); wall "
           "= process (dexitac) or loop (baselines, with decoding) time / frames, including the "
           "rest calibration.", "",
+          "Per stage, median ms per frame (dexitac: its CSV's t_detect_ms (with frame "
+          "preparation), t_kde_ms, t_segment_ms; baselines: detection, density, centre):", "",
+          stage_table(results), "",
           "```json", json.dumps(notes, indent=1), "```", ""]
     report = a.out / f"{a.date}.md"
     report.write_text("\n".join(md))
