@@ -4,7 +4,9 @@
 //! One module per step: [`frame`] (grey, crop, rescale) -> [`markers`] (DoH
 //! blobs) -> [`density`] (kernel density, Eq. 1) -> [`contact`] (region and
 //! centre, Eq. 2) -> [`displacement`] (Eq. 3). [`calibrate`] builds the rest
-//! reference, [`tracking`] adds marker tracking beyond the paper, and
+//! reference (from rest frames, or estimated from the frames themselves),
+//! [`area`] is the sensing area detections are kept in, [`tracking`] adds
+//! marker tracking beyond the paper, and
 //! [`pipeline`] runs the stages on one frame with per-stage times.
 //! [`params`] holds the tunables and their TOML form, [`sensor_setup`] tunes
 //! a detector to a skin's pin count and checks a skin's health.

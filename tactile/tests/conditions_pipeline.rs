@@ -125,7 +125,7 @@ fn a_sensing_area_from_the_config_drops_everything_outside_it() {
         },
         ..Params::default()
     };
-    let cal = calibrate::calibrate(&[rest.image.clone()], &params).unwrap();
+    let cal = calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
     let left = rest.markers.iter().filter(|p| p.x < 319.5).count();
     assert!(cal.rest_markers.iter().all(|p| p.x <= 320.5));
     assert!(
