@@ -51,20 +51,25 @@ pub fn image_files(dir: &Path) -> Result<Vec<PathBuf>, SourceError> {
     Ok(files)
 }
 
-/// Reads an image file and prepares it as a working grey frame.
+/// Reads an image file and prepares it as a working grey frame. Colour
+/// images go through the pipeline's own grey conversion
+/// ([`frame::to_grey`]), so a frame gives the same grey here as in
+/// `dexitac analyze`.
 pub fn load_frame(path: &Path, params: &FrameParams) -> Result<GreyFrame, SourceError> {
-    let img = image::open(path)
-        .map_err(|e| SourceError::Decode {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?
-        .into_luma8();
+    let img = image::open(path).map_err(|e| SourceError::Decode {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
     let (w, h) = (img.width() as usize, img.height() as usize);
-    let data = img.into_raw();
+    let (channels, data) = match img {
+        image::DynamicImage::ImageLuma8(b) => (1, b.into_raw()),
+        image::DynamicImage::ImageRgba8(b) => (4, b.into_raw()),
+        other => (3, other.into_rgb8().into_raw()),
+    };
     let raw = RawFrame {
         width: w,
         height: h,
-        channels: 1,
+        channels,
         data: &data,
     };
     Ok(frame::prepare(&raw, params)?.grey)
