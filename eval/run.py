@@ -264,7 +264,8 @@ def metrics(rows: list[dict], labels: list[dict], meta: dict, wall_s: float) -> 
     reg = meta.get("regress_on") or []
     if reg:
         X = np.array([[fnum(lab[r["frame"]][c]) for c in reg] for r in rows])
-        sel = has
+        # Frames without labels (a rest frame's NaN ball position) are out.
+        sel = has & np.isfinite(X).all(axis=1)
         m["r2_n"] = int(sel.sum())
         if sel.sum() >= 10:
             m["r2x"] = loo_r2(cx[sel], X[sel])
