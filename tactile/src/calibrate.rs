@@ -86,11 +86,7 @@ pub fn calibrate_mapped(
     params: &Params,
     map: WorkToInput,
 ) -> Result<Calibration, CalibrationError> {
-    let first = rest.first().ok_or(CalibrationError::NoFrames)?;
-    let (w, h) = (first.width(), first.height());
-    if let Some(f) = rest.iter().find(|f| (f.width(), f.height()) != (w, h)) {
-        return Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height()));
-    }
+    let (first, w, h) = same_size(rest)?;
     let given = SensingArea::from_spec(&params.area, params.area_mask.as_ref(), w, h, map)?;
     let mut detector = markers::auto_detector(first, &params.markers)?;
     detector.area = given.clone();
@@ -119,6 +115,16 @@ pub fn calibrate_mapped(
     finish(w, h, detector, stable, given, params)
 }
 
+/// The first frame and the size all frames share.
+fn same_size(frames: &[GreyFrame]) -> Result<(&GreyFrame, usize, usize), CalibrationError> {
+    let first = frames.first().ok_or(CalibrationError::NoFrames)?;
+    let (w, h) = (first.width(), first.height());
+    match frames.iter().find(|f| (f.width(), f.height()) != (w, h)) {
+        Some(f) => Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height())),
+        None => Ok((first, w, h)),
+    }
+}
+
 /// Most frames [`calibrate_from_frames`] looks at (evenly spaced).
 pub const REST_FROM_FRAMES_MAX: usize = 63;
 
@@ -143,11 +149,7 @@ pub fn calibrate_from_frames(
     params: &Params,
     map: WorkToInput,
 ) -> Result<Calibration, CalibrationError> {
-    let first = frames.first().ok_or(CalibrationError::NoFrames)?;
-    let (w, h) = (first.width(), first.height());
-    if let Some(f) = frames.iter().find(|f| (f.width(), f.height()) != (w, h)) {
-        return Err(CalibrationError::SizeMismatch(w, h, f.width(), f.height()));
-    }
+    let (_, w, h) = same_size(frames)?;
     let n = frames.len().min(REST_FROM_FRAMES_MAX);
     let picked: Vec<&GreyFrame> = (0..n).map(|k| &frames[k * frames.len() / n]).collect();
     let median = median_image(&picked);

@@ -160,15 +160,18 @@ pub struct Detector {
 /// noise. Vignetting to 0.45 and a 30 % gradient stay well above it.
 const RANGE_FLOOR_FRACTION: f32 = 0.2;
 
+/// The frame with bright markers: itself, or its negative for dark ones.
+fn positive(frame: &GreyFrame, dark: bool) -> std::borrow::Cow<'_, GreyFrame> {
+    if dark {
+        std::borrow::Cow::Owned(frame.inverted())
+    } else {
+        std::borrow::Cow::Borrowed(frame)
+    }
+}
+
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
-    let inverted;
-    let frame = if det.dark {
-        inverted = frame.inverted();
-        &inverted
-    } else {
-        frame
-    };
+    let frame = &*positive(frame, det.dark);
     let (fw, fh) = (frame.width(), frame.height());
     let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
     let (x1, y1) = (x1.min(fw), y1.min(fh));
@@ -255,13 +258,7 @@ pub fn follow(
     near: &[PointPx],
     reach_px: f64,
 ) -> Option<Markers> {
-    let inverted;
-    let frame = if det.dark {
-        inverted = frame.inverted();
-        &inverted
-    } else {
-        frame
-    };
+    let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
     let mut lost = 0usize;
     let mut found: Vec<(PointPx, f32, f32)> = Vec::with_capacity(near.len());
@@ -624,13 +621,7 @@ fn detector_for(
     params: &MarkerParams,
     dark: bool,
 ) -> Result<Detector, MarkerError> {
-    let inverted;
-    let rest = if dark {
-        inverted = rest.inverted();
-        &inverted
-    } else {
-        rest
-    };
+    let rest = &*positive(rest, dark);
     let (w, h) = (rest.width(), rest.height());
     if w < 16 || h < 16 {
         return Err(MarkerError::TooSmall {
