@@ -323,7 +323,7 @@ pub fn follow(
 }
 
 /// Most refinement passes per followed marker.
-const FOLLOW_PASSES: usize = 3;
+pub const FOLLOW_PASSES: usize = 3;
 /// A followed marker whose centroid moved less than this in a pass has
 /// settled, px.
 const FOLLOW_SETTLED_PX: f64 = 0.25;
