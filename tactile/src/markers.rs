@@ -66,14 +66,17 @@ pub enum MarkerError {
 pub struct Marker {
     /// Sub-pixel centroid, working px.
     pub pos: PointPx,
-    /// Blob strength (sqrt of the determinant of Hessian), grey levels.
+    /// Blob strength (sqrt of the determinant of Hessian), grey levels; a
+    /// marker found by [`follow`] carries its contrast instead.
     pub strength: f32,
-    /// Grey level at the detection maximum (binned image when binning).
+    /// Grey level at the detection maximum (binned image when binning; 0
+    /// from [`follow`]).
     pub peak: u8,
     /// Peak level over the local light: 0 at the local background, 1 at
-    /// the local marker level.
+    /// the local marker level (1 from [`follow`]).
     pub rel_level: f32,
-    /// Blob strength over the local range (see [`Detector`]).
+    /// Blob strength over the local range (see [`Detector`]); from
+    /// [`follow`], the contrast over the frame's median marker contrast.
     pub rel_strength: f32,
     /// Effective area above half maximum, px^2 (an LED or a reflection is
     /// several times a pin's, a dust speck a fraction).
