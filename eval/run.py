@@ -333,6 +333,8 @@ def main() -> None:
     ap.add_argument("--rest-modes", nargs="+", default=["level", "median"], choices=["level", "median"],
                     help="rest frames for sets without rest.png")
     ap.add_argument("--date", default=dt.date.today().isoformat())
+    ap.add_argument("--tools", nargs="+", default=TOOLS, choices=TOOLS,
+                    help="run only these tools (e.g. dexitac after a change, the baselines unchanged)")
     a = ap.parse_args()
     exe = str(Path(a.dexitac).resolve())
     if not Path(exe).is_file():
@@ -360,20 +362,24 @@ def main() -> None:
             # For the median rest, dexitac makes its own from the frames when
             # it can (`--rest-from-frames`); the baselines use the median image.
             own = rest_from_frames and rest_name == "median"
-            rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "default", None, from_frames=own)
-            if own:
-                note = (note + " " if note else "") + "rest: --rest-from-frames"
-            results.append(dict(base, tool="dexitac default", m=metrics(rows, labels, meta, wall), note=note))
-            cfg, tune_msg = tune_dexitac(exe, rest, meta["pin_count"], pitch, out_dir)
-            notes.setdefault("tune", {})[f"{s}/{rest_name}"] = tune_msg
-            rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "tuned", cfg)
-            results.append(dict(base, tool="dexitac tuned", m=metrics(rows, labels, meta, wall), note=note))
+            if "dexitac default" in a.tools:
+                rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "default", None, from_frames=own)
+                if own:
+                    note = (note + " " if note else "") + "rest: --rest-from-frames"
+                results.append(dict(base, tool="dexitac default", m=metrics(rows, labels, meta, wall), note=note))
+            cfg = None
+            if "dexitac tuned" in a.tools:
+                cfg, tune_msg = tune_dexitac(exe, rest, meta["pin_count"], pitch, out_dir)
+                notes.setdefault("tune", {})[f"{s}/{rest_name}"] = tune_msg
+                rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "tuned", cfg)
+                results.append(dict(base, tool="dexitac tuned", m=metrics(rows, labels, meta, wall), note=note))
             for kind in ("opencv", "doh"):
-                rows, wall = run_baseline(kind, set_dir, rest, pitch, out_dir)
-                results.append(dict(base, tool=kind, m=metrics(rows, labels, meta, wall)))
+                if kind in a.tools:
+                    rows, wall = run_baseline(kind, set_dir, rest, pitch, out_dir)
+                    results.append(dict(base, tool=kind, m=metrics(rows, labels, meta, wall)))
             ref = reference_pins(set_dir, meta, rest_name, rest)
             if ref is not None:
-                for tool in TOOLS:
+                for tool in a.tools:
                     pts = rest_markers(exe, tool, s, rest, out_dir, cfg if tool == "dexitac tuned" else None)
                     positions.append(dict(set=s, rest=rest_name, tool=tool, pins=len(ref),
                                           check=position_check(ref, pts, pitch)))
