@@ -219,7 +219,15 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         // A saturated marker's candidate is its plateau's first pixel, off
         // the centre: one more pass from the first centroid re-centres the
         // window on the blob.
-        if let Some((pos, _, area_px)) = settle(frame, guess, det) {
+        let refined = refine(frame, guess, det.radius_px, det.min_contrast).and_then(|r| {
+            let p = r.0;
+            if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
+                refine(frame, p, det.radius_px, det.min_contrast)
+            } else {
+                Some(r)
+            }
+        });
+        if let Some((pos, _, area_px)) = refined {
             if det.area.as_ref().is_some_and(|a| !a.contains(pos)) {
                 continue;
             }
@@ -240,8 +248,8 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
 
 /// Markers found by following known markers instead of searching the
 /// frame: each of `near` (usually the rest markers) is refined by the
-/// half-maximum centroid in a small window around it, re-centred until it
-/// settles (`settle`, the same centre [`detect`] gives). `None` (search the whole frame with [`detect`]
+/// half-maximum centroid in a small window around it, re-centred up to
+/// [`FOLLOW_PASSES`] times. `None` (search the whole frame with [`detect`]
 /// instead) when more than [`FOLLOW_MAX_LOST`] of them are lost: moved more
 /// than `reach_px`, faded below [`FOLLOW_MIN_CONTRAST`] of the frame's
 /// median marker contrast (or the detector's absolute floor), or merged
@@ -258,9 +266,24 @@ pub fn follow(
     let mut lost = 0usize;
     let mut found: Vec<(PointPx, f32, f32)> = Vec::with_capacity(near.len());
     for &p in near {
-        let settled = settle(frame, p, det);
-        let at = settled.map_or(p, |s| s.0);
-        let hit = settled.map(|s| (s.1, s.2));
+        let mut at = p;
+        let mut hit = None;
+        for _ in 0..FOLLOW_PASSES {
+            match refine(frame, at, det.radius_px, det.min_contrast) {
+                Some((c, contrast, area)) => {
+                    let step = (c.x - at.x).hypot(c.y - at.y);
+                    at = c;
+                    hit = Some((contrast, area));
+                    if step < FOLLOW_SETTLED_PX {
+                        break;
+                    }
+                }
+                None => {
+                    hit = None;
+                    break;
+                }
+            }
+        }
         let kept = hit.filter(|_| {
             (at.x - p.x).hypot(at.y - p.y) <= reach_px
                 && det.area.as_ref().is_none_or(|a| a.contains(at))
@@ -302,29 +325,11 @@ pub fn follow(
     Some(Markers { list })
 }
 
-/// Most refinement passes per marker (see [`settle`]).
-pub const SETTLE_PASSES: usize = 4;
-
-/// The centroid of the blob near `start`: [`refine`] re-centred on its own
-/// result until the window stops moving (the window depends only on the
-/// rounded guess, so the result is the same from any start that reaches
-/// that window: a marker found by [`detect`] and the same marker followed
-/// by [`follow`] get the same centre, and an unmoved frame shows no
-/// displacement). At most [`SETTLE_PASSES`] passes.
-fn settle(frame: &GreyFrame, start: PointPx, det: &Detector) -> Option<(PointPx, f32, f32)> {
-    let window = |p: PointPx| ((p.x + 0.5) as i64, (p.y + 0.5) as i64);
-    let mut at = start;
-    let mut last = None;
-    for _ in 0..SETTLE_PASSES {
-        let r = refine(frame, at, det.radius_px, det.min_contrast)?;
-        if window(r.0) == window(at) {
-            return Some(r);
-        }
-        at = r.0;
-        last = Some(r);
-    }
-    last
-}
+/// Most refinement passes per followed marker.
+pub const FOLLOW_PASSES: usize = 3;
+/// A followed marker whose centroid moved less than this in a pass has
+/// settled, px.
+const FOLLOW_SETTLED_PX: f64 = 0.25;
 /// Fraction of followed markers that may be lost before the frame is
 /// searched in full.
 pub const FOLLOW_MAX_LOST: f64 = 0.01;
@@ -430,6 +435,10 @@ impl Envelope {
 /// A rest marker's effective area must be within these multiples of the
 /// median to be a pin.
 pub const SIZE_RANGE: (f32, f32) = (0.3, 2.5);
+
+/// A first centroid this far from its candidate (px, either axis) is refined
+/// once more around itself.
+const RECENTRE_PX: f64 = 1.5;
 
 /// Two refined centroids closer than this are one marker, px.
 const DUPLICATE_PX: f64 = 2.0;
