@@ -296,8 +296,10 @@ fn garbage_and_corrupt_files_are_errors_not_panics() {
     ));
     let (bytes, _, _) = record(1);
     // Flip bytes across the file: each must give an error or a readable
-    // recording, never a panic.
-    for at in (8..bytes.len()).step_by(bytes.len() / 23 + 1) {
+    // recording, never a panic or an abort. (A flip on a record length
+    // inside a zstd chunk once made mcap reserve 93 TB; the chunks are now
+    // checked first, and 600 places are tried.)
+    for at in (8..bytes.len()).step_by(bytes.len() / 600 + 1) {
         let mut bad = bytes.clone();
         bad[at] ^= 0x5a;
         let _ = read(&bad);

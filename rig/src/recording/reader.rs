@@ -162,6 +162,10 @@ impl Recording {
                 reason: "no MCAP magic at the start".into(),
             });
         }
+        // mcap 0.26 reserves a record's claimed length inside a chunk before
+        // reading it: one corrupt length aborts the process. The chunks are
+        // checked first, and the stream stops before a bad one.
+        let bad_chunk = check_chunks(bytes);
         let stream = mcap::MessageStream::new(bytes).map_err(|e| ReadError::NotMcap {
             path: path.to_path_buf(),
             reason: e.to_string(),
@@ -173,6 +177,12 @@ impl Recording {
         let mut damage = None;
         let mut index = 0;
         for message in stream {
+            if let Some((reason, before)) = &bad_chunk {
+                if index >= *before {
+                    damage = Some(reason.clone());
+                    break;
+                }
+            }
             let message = match message {
                 Ok(m) => m,
                 Err(e) => {
@@ -182,6 +192,11 @@ impl Recording {
             };
             rec.add(&message, index)?;
             index += 1;
+        }
+        if damage.is_none() {
+            if let Some((reason, _)) = bad_chunk {
+                damage = Some(reason);
+            }
         }
         // A finished file ends with a footer; without one, the writer did
         // not finish (the stream may still have ended on a record boundary).
@@ -348,4 +363,61 @@ impl FrameSource for ReplaySource {
             frame,
         }))
     }
+}
+
+/// Largest uncompressed chunk a recording may hold, bytes (the writer's
+/// chunks are far smaller).
+const MAX_CHUNK_BYTES: u64 = 256 << 20;
+/// MCAP opcode of a message record.
+const OP_MESSAGE: u8 = 0x05;
+
+/// The first chunk whose contents cannot be read safely (a size beyond
+/// [`MAX_CHUNK_BYTES`], data that does not decompress, a record longer than
+/// what is left of its chunk), and the number of messages in the chunks
+/// before it. Damage outside chunks is left to the message stream, which
+/// reports it as an error.
+fn check_chunks(bytes: &[u8]) -> Option<(String, usize)> {
+    let reader = mcap::read::LinearReader::new(bytes).ok()?;
+    let mut messages = 0usize;
+    for record in reader {
+        let Ok(mcap::records::Record::Chunk { header, data }) = record else {
+            if record.is_err() {
+                return None;
+            }
+            continue;
+        };
+        let before = messages;
+        let bad = |reason: String| Some((format!("bad chunk: {reason}"), before));
+        if header.uncompressed_size > MAX_CHUNK_BYTES {
+            return bad(format!("claims {} bytes", header.uncompressed_size));
+        }
+        let raw: std::borrow::Cow<'_, [u8]> = match header.compression.as_str() {
+            "" => data,
+            "zstd" => match zstd::bulk::decompress(&data, header.uncompressed_size as usize) {
+                Ok(v) => v.into(),
+                Err(e) => return bad(format!("zstd: {e}")),
+            },
+            other => return bad(format!("unknown compression {other:?}")),
+        };
+        let mut rest = &raw[..];
+        while !rest.is_empty() {
+            let Some((&op, tail)) = rest.split_first() else {
+                break;
+            };
+            let Some(len) = tail
+                .get(..8)
+                .and_then(|b| <[u8; 8]>::try_from(b).ok())
+                .map(u64::from_le_bytes)
+            else {
+                return bad("a record header runs past the chunk".into());
+            };
+            let body = &tail[8..];
+            if len > body.len() as u64 {
+                return bad(format!("a record of {len} bytes in {} left", body.len()));
+            }
+            messages += usize::from(op == OP_MESSAGE);
+            rest = &body[len as usize..];
+        }
+    }
+    None
 }
