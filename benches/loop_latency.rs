@@ -10,7 +10,7 @@
 //!
 //! `cargo bench -p dexitac --bench loop_latency [-- SAMPLES]`
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use dexitac_gripper::grasp::{CentreMm, Command, Grasp, GraspParams, Observation};
 use dexitac_protocol::{HostMsg, ValveState, CHAMBER_COUNT};
@@ -109,9 +109,9 @@ fn main() {
         link.keep_alive().expect("heartbeat");
         let _ = link.poll(Duration::ZERO).expect("poll");
 
-        let arrived = Instant::now();
+        let arrived = link.clock().now_us();
         let result = pipeline.run(frame).expect("pipeline");
-        let piped = Instant::now();
+        let piped = link.clock().now_us();
         let centre: Option<CentreMm> = result.contact.map(|c| centre_mm(&pipeline, c.centre));
         let decision = grasp.observe(
             0,
@@ -126,10 +126,10 @@ fn main() {
             other => panic!("sample {i}: unexpected decision {other:?}"),
         };
         link.command(msg).expect("command");
-        let written = link.last_command_written().expect("written");
-        total.push((written - arrived).as_secs_f64() * 1e3);
-        pipe.push((piped - arrived).as_secs_f64() * 1e3);
-        rest_ms.push((written - piped).as_secs_f64() * 1e3);
+        let written = link.last_command_written_us().expect("written");
+        total.push((written - arrived) as f64 / 1e3);
+        pipe.push((piped - arrived) as f64 / 1e3);
+        rest_ms.push((written - piped) as f64 / 1e3);
     }
     link.command(HostMsg::Disarm).expect("disarm");
     for v in [&mut total, &mut pipe, &mut rest_ms] {

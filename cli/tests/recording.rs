@@ -14,7 +14,7 @@ use dexitac_rig::recording::{replay, topic, ReadError, RecordOptions, Recorder, 
 use dexitac_sim::mcu::{SimMcu, SimMcuConfig};
 use dexitac_sim::plant::{ContactState, FINGER_COUNT};
 use dexitac_sim::render::Renderer;
-use dexitac_sim::rig::{self, run_scenario, SimOptions};
+use dexitac_sim::rig::{self, run_scenario, Pace, SimOptions};
 use dexitac_sim::scenario::Scenario;
 use dexitac_tactile::params::Params;
 use dexitac_tactile::synth::SensorSpec;
@@ -51,10 +51,8 @@ fn a_recorded_sim_run_is_readable_by_the_mcap_reader_and_replays_exactly() {
     }
     let thread = recorder.spawn();
     let options = SimOptions {
-        speed: 2.0,
+        speed: Pace::Max,
         seed,
-        // A loaded two-core machine; the recording is under test here.
-        stall_tolerance_ms: 10_000,
         event_tap: Some(thread.sender()),
         share_frames: true,
         ..SimOptions::default()

@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use dexitac_protocol::{ArmState, Fault, HostMsg, ValveState, CHAMBER_COUNT};
 use dexitac_sim::mcu::{SimMcu, SimMcuConfig};
-use dexitac_sim::rig::{run_scenario, Outcome, SimOptions};
+use dexitac_sim::rig::{run_scenario, Outcome, Pace, SimOptions};
 use dexitac_sim::scenario::Scenario;
 
 /// One test at a time: they share two cores, and the first two run the
@@ -174,9 +174,8 @@ fn line_corruption_never_causes_a_wrong_valve_action() {
     let _serial = serial();
     let scenario = Scenario::load("disturbance").expect("preset");
     let options = SimOptions {
-        speed: if cfg!(debug_assertions) { 1.5 } else { 3.0 },
+        speed: Pace::Max,
         line_error_rate: 1e-3,
-        stall_tolerance_ms: 10_000,
         ..SimOptions::default()
     };
     let r = run_scenario(&scenario, &options).expect("simulated rig");

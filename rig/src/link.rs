@@ -22,11 +22,17 @@
 //! - [`Link::keep_alive`] sends a heartbeat when nothing was sent for
 //!   [`LinkConfig::heartbeat_ms`], so an armed MCU does not trip on host
 //!   silence.
+//! - Every time (ack timeouts, heartbeat, silence) is read on the link's
+//!   [`Clock`]: the wall clock by default, the simulated rig's clock with
+//!   [`Link::with_clock`] (a virtual clock's port advances the time while
+//!   the link waits for bytes).
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
+
+use crate::source::Clock;
 
 use dexitac_protocol::{
     Decoder, EncodedFrame, FaultEvent, Frame, HelloReply, HostMsg, McuMsg, NackReason, Telemetry,
@@ -38,29 +44,16 @@ use dexitac_protocol::{
 pub struct LinkConfig {
     /// Line speed, baud (the firmware's USART1 runs at 115 200).
     pub baud: u32,
-    /// How long to wait for an ack before sending again, ms.
+    /// How long to wait for an ack before sending again, ms of the link's clock.
     pub ack_timeout_ms: u64,
     /// How many times a command is sent again after a timeout.
     pub retries: u32,
-    /// Send a heartbeat when nothing was sent for this long, ms. Keep it well
-    /// under the firmware's host-silence deadline (500 ms by default).
+    /// Send a heartbeat when nothing was sent for this long, ms of the
+    /// link's clock. Keep it well under the firmware's host-silence deadline
+    /// (500 ms by default).
     pub heartbeat_ms: u64,
     /// Read timeout of one port read, ms (the granularity of every wait).
     pub read_timeout_ms: u64,
-}
-
-impl LinkConfig {
-    /// These settings for a peer whose clock runs `speed` times faster than
-    /// the wall clock (the simulated MCU): the heartbeat period shrinks so
-    /// that it stays inside the firmware's host-silence deadline in its
-    /// time. Ack timeouts stay: the peer answers within a tick either way.
-    pub fn scaled(mut self, speed: f64) -> Self {
-        if speed.is_finite() && speed > 1.0 {
-            self.heartbeat_ms = ((self.heartbeat_ms as f64 / speed) as u64).max(2);
-            self.read_timeout_ms = self.read_timeout_ms.min(self.heartbeat_ms / 2).max(1);
-        }
-        self
-    }
 }
 
 impl Default for LinkConfig {
@@ -190,10 +183,11 @@ pub struct Link<P> {
     config: LinkConfig,
     decoder: Decoder<McuMsg>,
     next_seq: u16,
-    last_tx: Option<Instant>,
-    last_command_written: Option<Instant>,
+    clock: Clock,
+    last_tx_us: Option<u64>,
+    last_command_written_us: Option<u64>,
     last_mcu_time_ms: Option<u32>,
-    last_rx: Instant,
+    last_rx_us: u64,
     events: VecDeque<McuEvent>,
     stats: LinkStats,
     path: Option<PathBuf>,
@@ -259,19 +253,25 @@ impl SerialLink {
 }
 
 impl<P: Port> Link<P> {
-    /// A link over an already open port. The port's reads should time out
-    /// after a few milliseconds (a `TimedOut` or `WouldBlock` read counts as
-    /// "no bytes yet").
+    /// A link over an already open port, on the wall clock. The port's
+    /// reads should time out after a few milliseconds (a `TimedOut` or
+    /// `WouldBlock` read counts as "no bytes yet").
     pub fn new(port: P, config: LinkConfig) -> Self {
+        Link::with_clock(port, config, Clock::wall())
+    }
+
+    /// A link over an already open port whose timeouts run on `clock`.
+    pub fn with_clock(port: P, config: LinkConfig, clock: Clock) -> Self {
         Link {
             port: Some(port),
             config,
             decoder: Decoder::new(),
             next_seq: 0,
-            last_tx: None,
-            last_command_written: None,
+            last_rx_us: clock.now_us(),
+            clock,
+            last_tx_us: None,
+            last_command_written_us: None,
             last_mcu_time_ms: None,
-            last_rx: Instant::now(),
             events: VecDeque::new(),
             stats: LinkStats::default(),
             path: None,
@@ -288,17 +288,32 @@ impl<P: Port> Link<P> {
         self.stats
     }
 
+    /// Moves the link's timeouts to `clock` (the task loop's). The times
+    /// noted so far are forgotten: the next [`Link::keep_alive`] sends a
+    /// heartbeat, and the silence counts from now.
+    pub fn set_clock(&mut self, clock: Clock) {
+        self.last_rx_us = clock.now_us();
+        self.last_tx_us = None;
+        self.last_command_written_us = None;
+        self.clock = clock;
+    }
+
+    /// The clock the link's timeouts run on.
+    pub fn clock(&self) -> &Clock {
+        &self.clock
+    }
+
     /// When the bytes of the last request's first attempt were written
-    /// (handed to the kernel's tty driver).
-    pub fn last_command_written(&self) -> Option<Instant> {
-        self.last_command_written
+    /// (handed to the kernel's tty driver), µs on the link's clock.
+    pub fn last_command_written_us(&self) -> Option<u64> {
+        self.last_command_written_us
     }
 
     /// Time since the last valid frame from the MCU (or since the link was
-    /// made). With telemetry on, a value of several telemetry periods means
-    /// the MCU reset or the line is dead.
+    /// made), on the link's clock. With telemetry on, a value of several
+    /// telemetry periods means the MCU reset or the line is dead.
     pub fn silent_for(&self) -> Duration {
-        self.last_rx.elapsed()
+        Duration::from_micros(self.clock.now_us().saturating_sub(self.last_rx_us))
     }
 
     /// Says hello: checks protocol version, hard limits and chamber count.
@@ -358,9 +373,10 @@ impl<P: Port> Link<P> {
     /// Sends a heartbeat if nothing was sent for [`LinkConfig::heartbeat_ms`].
     /// Returns whether it sent one.
     pub fn keep_alive(&mut self) -> Result<bool, LinkError> {
+        let now_us = self.clock.now_us();
         let due = self
-            .last_tx
-            .is_none_or(|t| t.elapsed() >= Duration::from_millis(self.config.heartbeat_ms));
+            .last_tx_us
+            .is_none_or(|t| now_us.saturating_sub(t) >= self.config.heartbeat_ms * 1_000);
         if due {
             self.send(HostMsg::Heartbeat)?;
         }
@@ -370,10 +386,11 @@ impl<P: Port> Link<P> {
     /// Reads for up to `wait` (at least one port read) and returns every
     /// event received so far.
     pub fn poll(&mut self, wait: Duration) -> Result<Vec<McuEvent>, LinkError> {
-        let until = Instant::now() + wait;
+        let wait_us = u64::try_from(wait.as_micros()).unwrap_or(u64::MAX);
+        let until_us = self.clock.now_us().saturating_add(wait_us);
         loop {
             self.read_some(|_| false)?;
-            if Instant::now() >= until {
+            if self.clock.now_us() >= until_us {
                 break;
             }
         }
@@ -405,10 +422,10 @@ impl<P: Port> Link<P> {
             }
             self.write_frame(seq, msg)?;
             if attempt == 0 {
-                self.last_command_written = self.last_tx;
+                self.last_command_written_us = self.last_tx_us;
             }
-            let until = Instant::now() + Duration::from_millis(self.config.ack_timeout_ms);
-            while Instant::now() < until {
+            let until_us = self.clock.now_us() + self.config.ack_timeout_ms * 1_000;
+            while self.clock.now_us() < until_us {
                 if let Some(reply) = self.read_some(answers)? {
                     tracing::trace!("link: #{seq} answered: {reply:?}");
                     return Ok((seq, reply));
@@ -431,7 +448,7 @@ impl<P: Port> Link<P> {
         // in user space, so the bytes are handed to the kernel here.
         port.write_all(&bytes)?;
         self.stats.frames_sent += 1;
-        self.last_tx = Some(Instant::now());
+        self.last_tx_us = Some(self.clock.now_us());
         Ok(())
     }
 
@@ -449,7 +466,7 @@ impl<P: Port> Link<P> {
                 continue;
             };
             self.stats.frames_received += 1;
-            self.last_rx = Instant::now();
+            self.last_rx_us = self.clock.now_us();
             if found.is_none() && wanted(&msg) {
                 found = Some(msg);
                 continue;

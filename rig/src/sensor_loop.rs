@@ -127,6 +127,7 @@ pub fn sensor_threads(
             .enumerate()
             .map(|(sensor, s)| {
                 let tx = tx.clone();
+                let clock = clock.clone();
                 scope.spawn(move || {
                     let r =
                         sensor_loop(sensor, s.source, &s.pipeline, clock, deadline_ms, stop, &tx);
@@ -200,8 +201,9 @@ pub fn run_with_grasp(
     std::thread::scope(|scope| {
         let (obs_tx, obs_rx) = mpsc::channel();
         let relay_tx = tx.clone();
-        let relay = scope.spawn(move || relay(obs_rx, clock, &relay_tx));
-        let mut failure = sensor_threads(sensors, clock, deadline_ms, stop, &obs_tx)
+        let relay_clock = clock.clone();
+        let relay = scope.spawn(move || relay(obs_rx, relay_clock, &relay_tx));
+        let mut failure = sensor_threads(sensors, clock.clone(), deadline_ms, stop, &obs_tx)
             .into_iter()
             .find_map(Result::err);
         // The relay ends when the last sender of observations is gone.

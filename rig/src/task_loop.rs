@@ -56,16 +56,51 @@
 //! # Clock
 //!
 //! Every time in the loop comes from an injected [`Clock`]: the wall clock
-//! on the rig, a clock running `speed` times faster in the simulator and
-//! tests. Only the link's own ack and heartbeat timeouts are wall-clock
-//! durations (scale them with [`LinkConfig::scaled`](crate::link::LinkConfig)).
+//! on the rig, a clock running `speed` times faster in the simulator in
+//! real time. The link's ack and heartbeat timeouts run on the link's own
+//! clock ([`Link::with_clock`]); give it the same one.
+//!
+//! On a **virtual clock** ([`Clock::is_virtual`]) the loop runs in lock
+//! step on one thread, and a run repeats exactly:
+//!
+//! 1. every sensor whose next frame is due ([`FrameSource::next_due_ms`])
+//!    gets its frame and pipeline run (the sensors in parallel, their
+//!    results handled in sensor order); processing takes no virtual time;
+//! 2. the time-driven steps and the link's events are handled, as below;
+//! 3. the link's read of the simulated port moves the time on by one read
+//!    timeout when no byte is waiting, and the simulated MCU and plant
+//!    catch up with it.
+//!
+//! Every source must then report when its frames are due.
+//!
+//! # Watchdogs
+//!
+//! Two checks end a run whose inputs went away, each within a stated time
+//! on the loop's clock:
+//!
+//! - **A sensor stops delivering frames** (a camera hangs, a renderer
+//!   stalls) for [`ControlConfig::sensor_timeout_ms`] once the fingers
+//!   began to close: the run ends with [`RuntimeError::SensorStalled`]. The
+//!   shutdown then seals the valves, so the grasp keeps its air and goes on
+//!   holding the object, and disarms the MCU: nobody moves an object the
+//!   host can no longer feel. It is the end of the run: a person decides
+//!   what happens to the object.
+//! - **The MCU goes silent** while its telemetry is on, for
+//!   [`ControlConfig::mcu_silence_ms`]: the loop says hello. If the MCU
+//!   answers it has restarted (the firmware boots disarmed, valves sealed,
+//!   telemetry off), and the run ends with [`RuntimeError::McuReset`] and
+//!   its reset cause; a run is never re-armed behind a person's back.
+//!   Without an answer, the link's error ends the run; the board then
+//!   trips on host silence on its own. A telemetry clock that runs
+//!   backwards is a reset as well.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use dexitac_protocol::{
-    Chambers, FaultEvent, HostMsg, NackReason, PumpMode, TankTargets, ValveState, CHAMBER_COUNT,
+    Chambers, FaultEvent, HostMsg, NackReason, PumpMode, ResetCause, TankTargets, ValveState,
+    CHAMBER_COUNT,
 };
 
 use crate::event::{RuntimeEvent, SensorReport, StopReason};
@@ -80,6 +115,12 @@ pub const DEFAULT_GRASP_CHAMBERS: [usize; 4] = [0, 1, 4, 5];
 /// Open-loop closing time without tactile feedback, ms: the paper's average
 /// time to a stable ClosureGrip (Table III: 3.38 s and 3.40 s).
 pub const OPEN_LOOP_CLOSE_MS: u64 = 3_400;
+/// A sensor without a frame for this long, once closing began, ends the
+/// run, ms (15 frame periods of a 30 fps camera; see [Watchdogs](self#watchdogs)).
+pub const SENSOR_TIMEOUT_MS: u64 = 500;
+/// The MCU silent for this long while its telemetry is on is asked whether
+/// it restarted, ms (10 periods of the default 20 ms telemetry).
+pub const MCU_SILENCE_MS: u64 = 200;
 
 /// One tactile sensor: its frames and its calibrated pipeline.
 pub struct Sensor {
@@ -114,6 +155,12 @@ pub struct ControlConfig {
     /// Send each working frame with its [`RuntimeEvent::Observation`]
     /// (for recording and the live view; costs one move per frame).
     pub share_frames: bool,
+    /// A sensor without a frame for this long after closing began ends the
+    /// run, ms ([Watchdogs](self#watchdogs)).
+    pub sensor_timeout_ms: u64,
+    /// The MCU silent this long with telemetry on is checked for a
+    /// restart, ms ([Watchdogs](self#watchdogs)).
+    pub mcu_silence_ms: u64,
 }
 
 impl Default for ControlConfig {
@@ -129,6 +176,8 @@ impl Default for ControlConfig {
             open_loop_close_ms: OPEN_LOOP_CLOSE_MS,
             task: None,
             share_frames: false,
+            sensor_timeout_ms: SENSOR_TIMEOUT_MS,
+            mcu_silence_ms: MCU_SILENCE_MS,
         }
     }
 }
@@ -143,8 +192,24 @@ pub enum RuntimeError {
     #[error("the MCU tripped: {} at {} ms (tanks {} / {} Pa)", .0.fault, .0.time_ms, .0.positive_tank_pa, .0.negative_tank_pa)]
     McuFault(FaultEvent),
     /// The MCU restarted during the run (it is disarmed, in its safe state).
-    #[error("the MCU reset during the run")]
-    McuReset,
+    #[error("the MCU reset during the run (reset cause {cause:?}, noticed at {t_ms} ms)")]
+    McuReset {
+        /// The reset cause its hello reported (`None`: its telemetry clock
+        /// ran backwards).
+        cause: Option<ResetCause>,
+        /// When the loop noticed, ms on its clock.
+        t_ms: u64,
+    },
+    /// A sensor stopped delivering frames while the gripper held or closed.
+    #[error("sensor {sensor} delivered no frame for {silent_ms} ms (last at {last_ms} ms): the grasp was sealed and the MCU disarmed")]
+    SensorStalled {
+        /// The sensor.
+        sensor: usize,
+        /// Its last frame's time (or when closing began), ms.
+        last_ms: u64,
+        /// How long it had been silent, ms.
+        silent_ms: u64,
+    },
     /// The MCU holds latched faults from an earlier trip: a person must
     /// acknowledge them (`ClearFaults`) before a run can arm it.
     #[error("the MCU has latched faults {:?} (last stop {:?}): acknowledge them before running", .faults.iter().collect::<Vec<_>>(), .last_stop)]
@@ -170,7 +235,8 @@ pub enum RuntimeError {
 /// A sensor thread's message to the link thread.
 enum SensorMsg {
     Report {
-        arrived: Instant,
+        /// When the frame came out of its source, µs on the loop's clock.
+        arrived_us: u64,
         report: SensorReport,
     },
     Failed {
@@ -196,6 +262,43 @@ pub fn lower_thread_priority() {
     }
 }
 
+/// One frame of a sensor through its pipeline: `None` when the source has
+/// ended.
+fn next_report(
+    sensor: usize,
+    setup: &mut Sensor,
+    share_frames: bool,
+    clock: &Clock,
+) -> Option<SensorMsg> {
+    let frame = match setup.source.next_frame(clock) {
+        Ok(Some(frame)) => frame,
+        Ok(None) => return None,
+        Err(e) => {
+            return Some(SensorMsg::Failed {
+                sensor,
+                reason: e.to_string(),
+            })
+        }
+    };
+    let arrived_us = clock.now_us();
+    Some(match setup.pipeline.run(&frame.frame) {
+        Ok(result) => SensorMsg::Report {
+            arrived_us,
+            report: SensorReport::new(
+                sensor,
+                frame.t_ms,
+                &setup.pipeline,
+                &result,
+                share_frames.then_some(frame.frame),
+            ),
+        },
+        Err(e) => SensorMsg::Failed {
+            sensor,
+            reason: e.to_string(),
+        },
+    })
+}
+
 fn sensor_thread(
     sensor: usize,
     mut setup: Sensor,
@@ -206,36 +309,11 @@ fn sensor_thread(
 ) {
     lower_thread_priority();
     while !stop.load(Ordering::Relaxed) {
-        let frame = match setup.source.next_frame(&clock) {
-            Ok(Some(frame)) => frame,
-            Ok(None) => break,
-            Err(e) => {
-                // The receiver only disappears when the loop has ended.
-                let _ = tx.send(SensorMsg::Failed {
-                    sensor,
-                    reason: e.to_string(),
-                });
-                return;
-            }
-        };
-        let arrived = Instant::now();
-        let msg = match setup.pipeline.run(&frame.frame) {
-            Ok(result) => SensorMsg::Report {
-                arrived,
-                report: SensorReport::new(
-                    sensor,
-                    frame.t_ms,
-                    &setup.pipeline,
-                    &result,
-                    share_frames.then_some(frame.frame),
-                ),
-            },
-            Err(e) => SensorMsg::Failed {
-                sensor,
-                reason: e.to_string(),
-            },
+        let Some(msg) = next_report(sensor, &mut setup, share_frames, &clock) else {
+            break;
         };
         let failed = matches!(msg, SensorMsg::Failed { .. });
+        // The receiver only disappears when the loop has ended.
         if tx.send(msg).is_err() || failed {
             return;
         }
@@ -259,8 +337,15 @@ struct Control<'a, P> {
     grasp: Grasp,
     stage: Stage,
     positive_tank_pa: Option<i32>,
-    max_loop_gap: Duration,
+    /// The longest gap between two passes of the loop, µs on its clock.
+    max_loop_gap_us: u64,
     task: Option<Primitive>,
+    /// Each sensor's latest frame, ms on the loop's clock.
+    last_frame_ms: [Option<u64>; SENSOR_COUNT],
+    /// When closing began (the sensor watchdog's start), ms.
+    closing_began_ms: Option<u64>,
+    /// The MCU was asked for telemetry.
+    telemetry_on: bool,
 }
 
 impl<P: Port> Control<'_, P> {
@@ -278,17 +363,17 @@ impl<P: Port> Control<'_, P> {
         &mut self,
         msg: HostMsg,
         reason: &'static str,
-        arrived: Option<Instant>,
+        arrived_us: Option<u64>,
     ) -> Result<(), RuntimeError> {
         if let Err(e) = self.link.command(msg) {
             return Err(self.explain(e));
         }
-        let written = self.link.last_command_written();
-        let from_frame = arrived
-            .zip(written)
-            .map(|(a, w)| w.saturating_duration_since(a));
+        let written_us = self.link.last_command_written_us();
+        let from_frame = arrived_us
+            .zip(written_us)
+            .map(|(a, w)| Duration::from_micros(w.saturating_sub(a)));
         let _ = self.events.send(RuntimeEvent::CommandSent {
-            t_ms: self.written_ms(written),
+            t_ms: written_us.map_or_else(|| self.clock.now_ms(), |w| w / 1_000),
             msg,
             reason,
             from_frame,
@@ -315,15 +400,6 @@ impl<P: Port> Control<'_, P> {
             }
         }
         e.into()
-    }
-
-    /// Clock time of a wall-clock instant in the recent past.
-    fn written_ms(&self, at: Option<Instant>) -> u64 {
-        let now = self.clock.now_ms();
-        let ago = at.map_or(0.0, |a| {
-            a.elapsed().as_secs_f64() * 1e3 * self.clock.speed()
-        });
-        now.saturating_sub(ago as u64)
     }
 
     fn setup(&mut self) -> Result<(), RuntimeError> {
@@ -365,6 +441,7 @@ impl<P: Port> Control<'_, P> {
         self.link.command(HostMsg::SetTelemetryInterval {
             interval_ms: self.config.telemetry_interval_ms,
         })?;
+        self.telemetry_on = self.config.telemetry_interval_ms > 0;
         self.stage = Stage::Charging {
             since_ms: self.clock.now_ms(),
         };
@@ -380,7 +457,7 @@ impl<P: Port> Control<'_, P> {
                 Err(LinkError::Nack {
                     reason: NackReason::Refused,
                     ..
-                }) if attempt < ATTEMPTS => std::thread::sleep(Duration::from_millis(20)),
+                }) if attempt < ATTEMPTS => self.clock.sleep(Duration::from_millis(20)),
                 other => return Ok(other?),
             }
         }
@@ -398,12 +475,35 @@ impl<P: Port> Control<'_, P> {
         )?;
         self.grasp.start(now);
         self.stage = Stage::Closing { since_ms: now };
+        self.closing_began_ms = Some(now);
         Ok(())
     }
 
-    /// Time-driven steps: charging done, open-loop seal, no-contact timeout.
+    /// The sensor watchdog: once closing began, every sensor delivers a
+    /// frame at least every [`ControlConfig::sensor_timeout_ms`].
+    fn check_sensors(&self, now: u64) -> Result<(), RuntimeError> {
+        let Some(began) = self.closing_began_ms else {
+            return Ok(());
+        };
+        for (sensor, last) in self.last_frame_ms.iter().enumerate() {
+            let last_ms = last.map_or(began, |t| t.max(began));
+            let silent_ms = now.saturating_sub(last_ms);
+            if silent_ms > self.config.sensor_timeout_ms {
+                return Err(RuntimeError::SensorStalled {
+                    sensor,
+                    last_ms,
+                    silent_ms,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Time-driven steps: charging done, open-loop seal, no-contact
+    /// timeout, the sensor watchdog.
     fn on_time(&mut self) -> Result<(), RuntimeError> {
         let now = self.clock.now_ms();
+        self.check_sensors(now)?;
         match self.stage {
             Stage::Charging { since_ms } => {
                 let target = f64::from(self.config.tank_targets_pa.0);
@@ -435,7 +535,7 @@ impl<P: Port> Control<'_, P> {
         Ok(())
     }
 
-    fn act(&mut self, decision: Decision, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+    fn act(&mut self, decision: Decision, arrived: Option<u64>) -> Result<(), RuntimeError> {
         tracing::debug!(
             "task loop: {:.3} s: Algorithm 1 decided {:?} ({:?})",
             self.clock.now_ms() as f64 / 1e3,
@@ -479,7 +579,7 @@ impl<P: Port> Control<'_, P> {
 
     /// Reports a primitive's event and commands its drive: the grasping
     /// chambers stay sealed, the manipulation chambers follow the drive.
-    fn on_task(&mut self, event: TaskEvent, arrived: Option<Instant>) -> Result<(), RuntimeError> {
+    fn on_task(&mut self, event: TaskEvent, arrived: Option<u64>) -> Result<(), RuntimeError> {
         let _ = self.events.send(RuntimeEvent::Task {
             t_ms: self.clock.now_ms(),
             event,
@@ -501,8 +601,14 @@ impl<P: Port> Control<'_, P> {
 
     fn on_sensor(&mut self, msg: SensorMsg) -> Result<bool, RuntimeError> {
         match msg {
-            SensorMsg::Report { arrived, report } => {
+            SensorMsg::Report {
+                arrived_us: arrived,
+                report,
+            } => {
                 let (sensor, t_ms, centre_mm) = (report.sensor, report.t_ms, report.centre_mm);
+                if let Some(last) = self.last_frame_ms.get_mut(sensor) {
+                    *last = Some(arrived / 1_000);
+                }
                 let _ = self.events.send(RuntimeEvent::Observation(report));
                 let started = self.task_started();
                 if let Some(e) = self
@@ -540,10 +646,33 @@ impl<P: Port> Control<'_, P> {
                     });
                 }
                 McuEvent::Fault(fault) => return Err(RuntimeError::McuFault(fault)),
-                McuEvent::McuReset => return Err(RuntimeError::McuReset),
+                McuEvent::McuReset => {
+                    return Err(RuntimeError::McuReset {
+                        cause: None,
+                        t_ms: self.clock.now_ms(),
+                    })
+                }
             }
         }
+        let silence = self.link.silent_for();
+        if self.telemetry_on && silence > Duration::from_millis(self.config.mcu_silence_ms) {
+            // Alive but without the telemetry it was asked for: it restarted
+            // (telemetry is off after a boot). No answer: the link's error.
+            tracing::warn!("task loop: the MCU has been silent for {silence:?}: saying hello");
+            let reply = self.link.hello()?;
+            return Err(RuntimeError::McuReset {
+                cause: Some(reply.reset_cause),
+                t_ms: self.clock.now_ms(),
+            });
+        }
         Ok(())
+    }
+
+    /// Notes the time of a pass of the loop (for the longest gap).
+    fn pass(&mut self, last_pass_us: &mut u64) {
+        let now = self.clock.now_us();
+        self.max_loop_gap_us = self.max_loop_gap_us.max(now.saturating_sub(*last_pass_us));
+        *last_pass_us = now;
     }
 
     fn run(
@@ -555,10 +684,9 @@ impl<P: Port> Control<'_, P> {
         let mut live = SENSOR_COUNT;
         // Wake often enough to keep the heartbeat well inside its period.
         let wait = Duration::from_millis((self.link.config().heartbeat_ms / 4).clamp(1, 10));
-        let mut last_pass = Instant::now();
+        let mut last_pass_us = self.clock.now_us();
         loop {
-            self.max_loop_gap = self.max_loop_gap.max(last_pass.elapsed());
-            last_pass = Instant::now();
+            self.pass(&mut last_pass_us);
             if stop.load(Ordering::Relaxed) {
                 return Ok(StopReason::Requested);
             }
@@ -588,6 +716,73 @@ impl<P: Port> Control<'_, P> {
         }
     }
 
+    /// The loop in lock step on a virtual clock (see [Clock](self#clock)).
+    fn run_lockstep(
+        &mut self,
+        sensors: &mut [Sensor],
+        stop: &AtomicBool,
+    ) -> Result<StopReason, RuntimeError> {
+        self.setup()?;
+        let share = self.config.share_frames;
+        let mut ended = [false; SENSOR_COUNT];
+        let mut last_pass_us = self.clock.now_us();
+        loop {
+            self.pass(&mut last_pass_us);
+            if stop.load(Ordering::Relaxed) {
+                return Ok(StopReason::Requested);
+            }
+            let now = self.clock.now_ms();
+            let due: Vec<bool> = sensors
+                .iter()
+                .zip(&ended)
+                .map(|(s, &e)| !e && s.source.next_due_ms().is_some_and(|t| t <= now))
+                .collect();
+            if due.iter().any(|&d| d) {
+                let clock = &self.clock;
+                // Both sensors' frames at once (each has its own source and
+                // pipeline); their results in sensor order.
+                let results: Vec<(usize, Option<SensorMsg>)> = std::thread::scope(|scope| {
+                    let handles: Vec<_> = sensors
+                        .iter_mut()
+                        .enumerate()
+                        .filter(|(i, _)| due.get(*i).copied().unwrap_or(false))
+                        .map(|(i, s)| (i, scope.spawn(move || next_report(i, s, share, clock))))
+                        .collect();
+                    handles
+                        .into_iter()
+                        .map(|(i, h)| {
+                            let msg = h.join().unwrap_or_else(|_| {
+                                Some(SensorMsg::Failed {
+                                    sensor: i,
+                                    reason: "its frame source or pipeline panicked".into(),
+                                })
+                            });
+                            (i, msg)
+                        })
+                        .collect()
+                });
+                for (i, msg) in results {
+                    match msg {
+                        Some(msg) => {
+                            self.on_sensor(msg)?;
+                        }
+                        None => {
+                            if let Some(e) = ended.get_mut(i) {
+                                *e = true;
+                            }
+                        }
+                    }
+                }
+                if ended.iter().all(|&e| e) {
+                    return Ok(StopReason::FramesEnded);
+                }
+            }
+            self.on_time()?;
+            // One read of the simulated port: the time moves on here.
+            self.on_mcu()?;
+        }
+    }
+
     /// Seal, then disarm; the first error is returned, both are tried.
     fn shutdown(&mut self) -> Result<(), LinkError> {
         let sealed = self.link.command(HostMsg::SealAll);
@@ -613,35 +808,74 @@ pub fn run<P: Port>(
             sensors.len()
         )));
     }
-    let sensor_stop = AtomicBool::new(false);
-    let (tx, rx) = mpsc::channel();
+    link.set_clock(clock.clone());
     let mut control = Control {
         config,
         link,
-        clock,
+        clock: clock.clone(),
         events,
         grasp: Grasp::new(config.grasp),
         stage: Stage::Charging { since_ms: 0 },
         positive_tank_pa: None,
-        max_loop_gap: Duration::ZERO,
+        max_loop_gap_us: 0,
         task: config
             .task
             .clone()
             .filter(|_| config.tactile_feedback)
             .map(Primitive::new),
+        last_frame_ms: [None; SENSOR_COUNT],
+        closing_began_ms: None,
+        telemetry_on: false,
     };
+    let (result, shutdown) = if clock.is_virtual() {
+        let mut sensors = sensors;
+        if let Some(i) = sensors
+            .iter()
+            .position(|s| s.source.next_due_ms().is_none())
+        {
+            return Err(RuntimeError::Config(format!(
+                "sensor {i}'s frame source cannot run on a virtual clock (it does not say when its frames are due)"
+            )));
+        }
+        let result = control.run_lockstep(&mut sensors, stop);
+        (result, control.shutdown())
+    } else {
+        run_threaded(&mut control, sensors, stop)
+    };
+    let result = match (result, shutdown) {
+        (Err(e), _) => Err(e),
+        (Ok(_), Err(e)) => Err(e.into()),
+        (Ok(reason), Ok(())) => Ok(reason),
+    };
+    let _ = events.send(RuntimeEvent::Stopped {
+        t_ms: clock.now_ms(),
+        max_loop_gap: Duration::from_micros(control.max_loop_gap_us),
+        outcome: result.as_ref().map(|r| *r).map_err(|e| e.to_string()),
+    });
+    result
+}
+
+/// The loop with one thread per sensor (real time).
+fn run_threaded<P: Port>(
+    control: &mut Control<'_, P>,
+    sensors: Vec<Sensor>,
+    stop: &AtomicBool,
+) -> (Result<StopReason, RuntimeError>, Result<(), LinkError>) {
+    let sensor_stop = AtomicBool::new(false);
+    let (tx, rx) = mpsc::channel();
     let halts: Vec<HaltHandle> = sensors
         .iter()
         .filter_map(|s| s.source.halt_handle())
         .collect();
+    let share = control.config.share_frames;
     // The gripper is sealed and disarmed as soon as the loop ends, before
     // waiting for the sensor threads (a camera may be blocked on a lost
     // device until its halt handle is called).
-    let (result, shutdown) = std::thread::scope(|scope| {
+    std::thread::scope(|scope| {
         for (i, sensor) in sensors.into_iter().enumerate() {
             let tx = tx.clone();
             let sensor_stop = &sensor_stop;
-            let share = config.share_frames;
+            let clock = control.clock.clone();
             scope.spawn(move || sensor_thread(i, sensor, share, clock, sensor_stop, &tx));
         }
         drop(tx);
@@ -652,16 +886,5 @@ pub fn run<P: Port>(
             halt();
         }
         (result, shutdown)
-    });
-    let result = match (result, shutdown) {
-        (Err(e), _) => Err(e),
-        (Ok(_), Err(e)) => Err(e.into()),
-        (Ok(reason), Ok(())) => Ok(reason),
-    };
-    let _ = events.send(RuntimeEvent::Stopped {
-        t_ms: clock.now_ms(),
-        max_loop_gap: control.max_loop_gap,
-        outcome: result.as_ref().map(|r| *r).map_err(|e| e.to_string()),
-    });
-    result
+    })
 }

@@ -25,6 +25,7 @@
 //! ([`SimMcuConfig::clock`]). The plant's time keeps running across an MCU
 //! reset; the firmware's own clock restarts from zero.
 
+use std::collections::VecDeque;
 use std::io::{self, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -115,6 +116,8 @@ struct SimHw {
     model: TankModel,
     chambers: Chambers,
     pumps: PumpOutputs,
+    /// Added to what the pressure sensors read, Pa (a sensor fault).
+    reading_offset_pa: (i32, i32),
 }
 
 impl Clock for SimHw {
@@ -131,6 +134,10 @@ const ADC_REFERENCE_MV: u32 = 3_300;
 impl PressureSource for SimHw {
     fn read_samples(&mut self) -> SensorSamples {
         let (positive_pa, negative_pa) = self.model.tanks_pa();
+        let (positive_pa, negative_pa) = (
+            positive_pa.saturating_add(self.reading_offset_pa.0),
+            negative_pa.saturating_add(self.reading_offset_pa.1),
+        );
         let fe = NOMINAL_FRONT_END;
         let counts =
             |pa| Ok([fe.sensor_counts(pa, SENSOR_SUPPLY_MV, ADC_REFERENCE_MV); OVERSAMPLE]);
@@ -290,6 +297,7 @@ fn new_hw(config: &SimMcuConfig) -> SimHw {
         model: TankModel::new(config.tanks),
         chambers: [ValveState::Hold; CHAMBER_COUNT],
         pumps: PumpOutputs::default(),
+        reading_offset_pa: (0, 0),
     }
 }
 
@@ -317,6 +325,97 @@ fn snapshot(hw: &SimHw, controller: &Controller) -> McuSnapshot {
     }
 }
 
+/// The firmware's control core, its hardware and (optionally) the plant,
+/// stepped on the simulated clock: what the MCU thread and the virtual MCU
+/// share.
+struct McuCore {
+    config: SimMcuConfig,
+    hw: SimHw,
+    page: RamPage,
+    controller: Controller,
+    plant: Option<SharedPlant>,
+    /// Simulated time of the last tick; the firmware's clock is `hw.now_ms`.
+    world_ms: u64,
+    tick_ms: u64,
+    tx: TxBuffer,
+    /// Called after each tick with the plant stepped (virtual MCU only).
+    observer: Option<TickObserver>,
+}
+
+/// Sees each control tick of a virtual MCU: simulated time, ms, the valve
+/// outputs and the plant.
+pub type TickObserver = Box<dyn FnMut(u64, &Chambers, &Plant) + Send>;
+
+impl McuCore {
+    fn new(config: SimMcuConfig, plant: Option<SharedPlant>, world_ms: u64) -> McuCore {
+        let page = config.calibration_page.clone();
+        McuCore {
+            hw: new_hw(&config),
+            controller: new_controller(&config, &page, ResetCause::PowerOn),
+            tick_ms: u64::from(config.firmware.tick_period_ms.max(1)),
+            config,
+            page,
+            plant,
+            world_ms,
+            tx: TxBuffer::default(),
+            observer: None,
+        }
+    }
+
+    /// A board reset: outputs safe, disarmed, the firmware's clock from 0.
+    fn reset(&mut self) {
+        self.hw = new_hw(&self.config);
+        self.controller = new_controller(&self.config, &self.page, ResetCause::Software);
+    }
+
+    /// Bytes from the host, at the current tick.
+    fn receive(&mut self, bytes: &[u8]) {
+        self.controller.receive(bytes, &self.hw, &mut self.tx);
+        // As the board does after each receive: store a new calibration
+        // (only while disarmed, pumps off; in memory here).
+        self.controller.store_calibration(&mut self.page);
+    }
+
+    /// Skips `ms` of simulated time without running it.
+    fn skip(&mut self, ms: u64) {
+        self.world_ms += ms;
+        self.hw.now_ms += ms;
+    }
+
+    /// Runs the ticks up to `due_ms` (the plant locked for all of them).
+    fn tick_to(&mut self, due_ms: u64, mut plant: Option<&mut Plant>) {
+        while self.world_ms + self.tick_ms <= due_ms {
+            self.tick(plant.as_deref_mut());
+        }
+    }
+
+    /// One control tick (and plant step).
+    fn tick(&mut self, plant: Option<&mut Plant>) {
+        let tick_ms = self.tick_ms;
+        self.world_ms += tick_ms;
+        self.hw.now_ms += tick_ms;
+        self.hw
+            .model
+            .advance(tick_ms as u32, self.hw.pumps, &self.hw.chambers);
+        self.controller.tick(&mut self.hw, &mut self.tx);
+        if let Some(plant) = plant {
+            plant.step(
+                self.world_ms,
+                tick_ms as u32,
+                self.hw.model.tanks_pa(),
+                &self.hw.chambers,
+            );
+            if let Some(observer) = self.observer.as_mut() {
+                observer(self.world_ms, &self.hw.chambers, plant);
+            }
+        }
+    }
+
+    fn snapshot(&self) -> McuSnapshot {
+        snapshot(&self.hw, &self.controller)
+    }
+}
+
 /// The MCU thread: read bytes, run the 1 kHz ticks due on the simulated
 /// clock, write the replies.
 fn run(
@@ -329,68 +428,273 @@ fn run(
 ) -> io::Result<()> {
     let clock = config
         .clock
+        .clone()
         .unwrap_or_else(|| SimClock::scaled(config.speed));
-    let tick_ms = u64::from(config.firmware.tick_period_ms.max(1));
-    let mut hw = new_hw(&config);
-    let mut page = config.calibration_page.clone();
-    let mut controller = new_controller(&config, &page, ResetCause::PowerOn);
-    // Simulated time of the last tick; the firmware's clock is `hw.now_ms`.
-    let mut world_ms = clock.now_ms();
-    let mut tx = TxBuffer::default();
+    let mut core = McuCore::new(config, plant, clock.now_ms());
     let mut buf = [0u8; 256];
     while !stop.load(Ordering::Relaxed) {
         if std::mem::take(&mut lock(shared).reset_requested) {
-            hw = new_hw(&config);
-            controller = new_controller(&config, &page, ResetCause::Software);
+            core.reset();
         }
         let n = dexitac_rig::link::read_ready(&mut port, &mut buf)?;
         let now_ms = clock.now_ms();
-        if now_ms > world_ms + MAX_LAG_MS {
+        if now_ms > core.world_ms + MAX_LAG_MS {
             // Stalled for longer than the lag bound: skip the lost time
             // rather than running the physics in a burst.
-            let skipped = now_ms - world_ms - MAX_LAG_MS;
-            world_ms += skipped;
-            hw.now_ms += skipped;
+            core.skip(now_ms - core.world_ms - MAX_LAG_MS);
         }
         // After any skip: bytes that arrived while this thread was stalled
         // are stamped with the time it resumed, so its own stall never looks
         // like host silence.
-        controller.receive(buf.get(..n).unwrap_or(&[]), &hw, &mut tx);
-        // As the board does after each receive: store a new calibration
-        // (only while disarmed, pumps off; in memory here).
-        controller.store_calibration(&mut page);
+        core.receive(buf.get(..n).unwrap_or(&[]));
         // A bounded batch, then back to the port: bytes that arrived during
         // a stall are read before the ticks they preceded run out.
-        let mut due_ms = now_ms.min(world_ms + MAX_BATCH_TICKS * tick_ms);
-        // Never wait for the plant's readers (low-priority camera threads
-        // could hold the lock while preempted): if it is busy, these ticks
-        // run on the next pass, a millisecond later.
-        let mut plant = match plant.as_ref().map(|p| p.try_lock()) {
+        let mut due_ms = now_ms.min(core.world_ms + MAX_BATCH_TICKS * core.tick_ms);
+        // Never wait for the plant's readers (camera threads could hold the
+        // lock while preempted): if it is busy, these ticks run on the next
+        // pass, a millisecond later.
+        let shared_plant = core.plant.clone();
+        let mut plant = match shared_plant.as_ref().map(|p| p.try_lock()) {
             None => None,
             Some(Ok(guard)) => Some(guard),
             Some(Err(std::sync::TryLockError::Poisoned(p))) => Some(p.into_inner()),
             Some(Err(std::sync::TryLockError::WouldBlock)) => {
-                due_ms = world_ms;
+                due_ms = core.world_ms;
                 None
             }
         };
-        while world_ms + tick_ms <= due_ms {
-            world_ms += tick_ms;
-            hw.now_ms += tick_ms;
-            hw.model.advance(tick_ms as u32, hw.pumps, &hw.chambers);
-            controller.tick(&mut hw, &mut tx);
-            if let Some(plant) = plant.as_mut() {
-                plant.step(world_ms, tick_ms as u32, hw.model.tanks_pa(), &hw.chambers);
-            }
-        }
+        core.tick_to(due_ms, plant.as_deref_mut());
         drop(plant);
-        if !tx.0.is_empty() {
-            port.write_all(&tx.0)?;
-            tx.0.clear();
+        if !core.tx.0.is_empty() {
+            port.write_all(&core.tx.0)?;
+            core.tx.0.clear();
         }
         let mut guard = lock(shared);
-        guard.snapshot = snapshot(&hw, &controller);
-        guard.calibration = controller.calibration_report();
+        guard.snapshot = core.snapshot();
+        guard.calibration = core.controller.calibration_report();
     }
     Ok(())
+}
+
+/// Serial line time of one byte at 115 200 baud (start, 8 data, stop bits), µs.
+const BYTE_TIME_US: u64 = 87;
+
+/// Something scheduled to happen to a virtual MCU.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum McuInjection {
+    /// The board resets (power glitch, watchdog) at this simulated time, ms.
+    ResetAt {
+        /// When, ms.
+        at_ms: u64,
+    },
+    /// From this time on, the pressure sensors read this much more than the
+    /// tanks hold (a sensor fault), Pa.
+    ReadingOffsetAt {
+        /// When, ms.
+        at_ms: u64,
+        /// Offset of the positive and the negative tank's reading, Pa.
+        offset_pa: (i32, i32),
+    },
+}
+
+struct VirtualState {
+    core: McuCore,
+    /// Host -> MCU bytes in flight: (arrival µs, bytes).
+    to_mcu: VecDeque<(u64, Vec<u8>)>,
+    /// MCU -> host bytes in flight: (arrival µs, byte).
+    to_host: VecDeque<(u64, u8)>,
+    /// When the line towards each side is free again, µs.
+    line_free_us: (u64, u64),
+    injections: Vec<McuInjection>,
+}
+
+impl VirtualState {
+    /// Runs the MCU (and the plant) up to `now_us`: host bytes are received
+    /// at the tick their last bit arrives, replies leave at the tick that
+    /// sent them, a byte time apart.
+    fn catch_up(&mut self, now_us: u64) {
+        let plant = self.core.plant.clone();
+        let mut guard = plant.as_ref().map(|p| lock_plant(p));
+        loop {
+            let next_ms = self.core.world_ms + self.core.tick_ms;
+            if next_ms * 1_000 > now_us {
+                break;
+            }
+            self.inject(next_ms);
+            self.deliver_to_mcu(next_ms * 1_000);
+            self.core.tick(guard.as_deref_mut());
+            self.send_to_host(next_ms * 1_000);
+        }
+        drop(guard);
+    }
+
+    fn inject(&mut self, t_ms: u64) {
+        let core = &mut self.core;
+        self.injections.retain(|i| match *i {
+            McuInjection::ResetAt { at_ms } if at_ms <= t_ms => {
+                core.reset();
+                false
+            }
+            McuInjection::ReadingOffsetAt { at_ms, offset_pa } if at_ms <= t_ms => {
+                core.hw.reading_offset_pa = offset_pa;
+                false
+            }
+            _ => true,
+        });
+        // A reset restores the sensors' state, not the offset: a faulty
+        // sensor stays faulty.
+    }
+
+    fn deliver_to_mcu(&mut self, t_us: u64) {
+        while self.to_mcu.front().is_some_and(|(at, _)| *at <= t_us) {
+            if let Some((_, bytes)) = self.to_mcu.pop_front() {
+                self.core.receive(&bytes);
+            }
+        }
+        self.send_to_host(t_us);
+    }
+
+    fn send_to_host(&mut self, t_us: u64) {
+        let mut at = self.line_free_us.1.max(t_us);
+        for b in self.core.tx.0.drain(..) {
+            at += BYTE_TIME_US;
+            self.to_host.push_back((at, b));
+        }
+        self.line_free_us.1 = at;
+    }
+
+    fn from_host(&mut self, t_us: u64, bytes: &[u8]) {
+        let at = self.line_free_us.0.max(t_us) + BYTE_TIME_US * bytes.len() as u64;
+        self.line_free_us.0 = at;
+        self.to_mcu.push_back((at, bytes.to_vec()));
+    }
+}
+
+/// A simulated MCU on a virtual clock ([`SimClock::virtual_clock`]): the
+/// same control core (and plant) as [`SimMcu`], without a thread or a pty.
+/// It runs only when its port ([`VirtualMcu::port`]) is read or written
+/// and then catches up with the clock, tick by tick; bytes take their
+/// serial line time (115 200 baud) each way. A read that finds no byte
+/// moves the clock on by the read timeout: the host's waits are what moves
+/// virtual time.
+#[derive(Clone)]
+pub struct VirtualMcu {
+    state: Arc<Mutex<VirtualState>>,
+    clock: SimClock,
+}
+
+fn lock_virtual(state: &Mutex<VirtualState>) -> MutexGuard<'_, VirtualState> {
+    state
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+impl VirtualMcu {
+    /// A virtual MCU (with `plant`, stepped every tick) on `clock`, which
+    /// must be virtual.
+    pub fn new(config: SimMcuConfig, plant: Option<SharedPlant>, clock: SimClock) -> VirtualMcu {
+        let core = McuCore::new(config, plant, clock.now_ms());
+        VirtualMcu {
+            state: Arc::new(Mutex::new(VirtualState {
+                core,
+                to_mcu: VecDeque::new(),
+                to_host: VecDeque::new(),
+                line_free_us: (0, 0),
+                injections: Vec::new(),
+            })),
+            clock,
+        }
+    }
+
+    /// Calls `observer` after every tick (with the plant stepped).
+    pub fn observe(&self, observer: TickObserver) {
+        lock_virtual(&self.state).core.observer = Some(observer);
+    }
+
+    /// Schedules `injection`.
+    pub fn inject(&self, injection: McuInjection) {
+        lock_virtual(&self.state).injections.push(injection);
+    }
+
+    /// The host's end of the serial line; a read that finds no byte waits
+    /// up to `read_timeout_ms` of virtual time.
+    pub fn port(&self, read_timeout_ms: u64) -> VirtualPort {
+        VirtualPort {
+            mcu: self.clone(),
+            read_timeout_us: read_timeout_ms.max(1) * 1_000,
+        }
+    }
+
+    /// Runs the MCU and the plant up to the clock's time.
+    pub fn catch_up(&self) {
+        lock_virtual(&self.state).catch_up(self.clock.now_us());
+    }
+
+    /// The outputs and state at the clock's time.
+    pub fn snapshot(&self) -> McuSnapshot {
+        let mut state = lock_virtual(&self.state);
+        state.catch_up(self.clock.now_us());
+        state.core.snapshot()
+    }
+
+    /// The sensor calibration the controller applies.
+    pub fn calibration(&self) -> CalibrationReport {
+        lock_virtual(&self.state)
+            .core
+            .controller
+            .calibration_report()
+    }
+}
+
+/// The host's end of a [`VirtualMcu`]'s serial line.
+pub struct VirtualPort {
+    mcu: VirtualMcu,
+    read_timeout_us: u64,
+}
+
+impl io::Read for VirtualPort {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let clock = &self.mcu.clock;
+        let mut state = lock_virtual(&self.mcu.state);
+        let deadline_us = clock.now_us() + self.read_timeout_us;
+        loop {
+            let now_us = clock.now_us();
+            state.catch_up(now_us);
+            let ready = state.to_host.front().is_some_and(|(at, _)| *at <= now_us);
+            if ready || now_us >= deadline_us {
+                break;
+            }
+            // On to the next byte's arrival or the next tick, whichever is first.
+            let next_tick_us = (state.core.world_ms + state.core.tick_ms) * 1_000;
+            let next_byte_us = state.to_host.front().map_or(u64::MAX, |(at, _)| *at);
+            clock.sleep_until_us(next_tick_us.min(next_byte_us).min(deadline_us));
+        }
+        let now_us = clock.now_us();
+        let mut n = 0;
+        for slot in buf.iter_mut() {
+            match state.to_host.front() {
+                Some(&(at, b)) if at <= now_us => {
+                    *slot = b;
+                    n += 1;
+                    state.to_host.pop_front();
+                }
+                _ => break,
+            }
+        }
+        Ok(n)
+    }
+}
+
+impl Write for VirtualPort {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let now_us = self.mcu.clock.now_us();
+        let mut state = lock_virtual(&self.mcu.state);
+        state.catch_up(now_us);
+        state.from_host(now_us, buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
 }

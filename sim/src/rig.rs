@@ -31,7 +31,9 @@ use std::time::{Duration, Instant};
 use dexitac_protocol::{HostMsg, ValveState};
 
 use crate::line::NoisyPort;
-use crate::mcu::{lock_plant, McuSnapshot, SharedPlant, SimMcu, SimMcuConfig};
+use crate::mcu::{
+    lock_plant, McuInjection, McuSnapshot, SharedPlant, SimMcu, SimMcuConfig, VirtualMcu,
+};
 use crate::plant::{ObjectState, Plant, Poke, WorldState, FINGER_COUNT};
 use crate::render::Renderer;
 use crate::scenario::Scenario;
@@ -59,13 +61,83 @@ const AFTER_END_MS: u64 = 1_500;
 /// model assumes; the plant models the actuator side itself.
 const STATUS_PERIOD: Duration = Duration::from_millis(200);
 
+/// How simulated time relates to the wall clock.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pace {
+    /// Virtual time, as fast as the CPU allows: the task loop, the
+    /// simulated MCU, the plant and the cameras run in lock step on one
+    /// virtual clock ([`Clock::virtual_clock`]), and a run with the same
+    /// scenario and seed repeats exactly. The firmware's deadlines apply at
+    /// their real values.
+    Max,
+    /// Real time, this many times faster than the wall clock (the live
+    /// view, soak tests): threads, a pty and the scheduler's jitter, as on
+    /// the rig.
+    Times(f64),
+}
+
+impl Pace {
+    /// `max`, or a speed factor in 0.1..=20.
+    pub fn parse(s: &str) -> Result<Pace, String> {
+        if s.eq_ignore_ascii_case("max") {
+            return Ok(Pace::Max);
+        }
+        let v: f64 = s
+            .parse()
+            .map_err(|_| format!("`{s}` is neither `max` nor a number"))?;
+        if (0.1..=20.0).contains(&v) {
+            Ok(Pace::Times(v))
+        } else {
+            Err(format!("speed must be `max` or lie in 0.1..=20, not {s}"))
+        }
+    }
+}
+
+impl std::fmt::Display for Pace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Pace::Max => write!(f, "max"),
+            Pace::Times(v) => write!(f, "{v}"),
+        }
+    }
+}
+
+/// Something that goes wrong during a run, on purpose (tests of the
+/// runtime's safety paths).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Injection {
+    /// The MCU resets (see [`McuInjection::ResetAt`]).
+    McuResetAt {
+        /// When, ms of simulated time.
+        at_ms: u64,
+    },
+    /// A pressure sensor starts reading high or low (see
+    /// [`McuInjection::ReadingOffsetAt`]).
+    ReadingOffsetAt {
+        /// When, ms.
+        at_ms: u64,
+        /// Positive and negative tank reading offsets, Pa.
+        offset_pa: (i32, i32),
+    },
+    /// A fingertip's camera stops delivering frames (it hangs, without
+    /// an error).
+    CameraStopsAt {
+        /// The finger.
+        finger: usize,
+        /// When, ms.
+        at_ms: u64,
+    },
+}
+
 /// How to run a scenario.
 #[derive(Debug, Clone)]
 pub struct SimOptions {
     /// Close the loop on the tactile frames (false: the paper's ablation).
     pub tactile_feedback: bool,
     /// Simulated time per wall-clock time.
-    pub speed: f64,
+    pub speed: Pace,
+    /// Faults to inject (only on the virtual clock, [`Pace::Max`]).
+    pub injections: Vec<Injection>,
     /// Print a one-line status on stderr while running.
     pub status: bool,
     /// Seed of the cameras' noise.
@@ -74,11 +146,11 @@ pub struct SimOptions {
     pub stop: Arc<AtomicBool>,
     /// Probability that a byte on the serial line is corrupted, each way.
     pub line_error_rate: f64,
-    /// Wall-clock time the host may stall before the simulated board trips
-    /// on host silence (and the link's ack timeout, a quarter of it), ms.
-    /// The rig's value is the firmware's 500 ms; tests on a loaded machine
-    /// with unoptimised builds give the loop more, as the grasp logic, not
-    /// the scheduler, is what they check (the silence trip has its own test).
+    /// In real time ([`Pace::Times`]): the wall-clock time the host may
+    /// stall before the simulated board trips on host silence (and the
+    /// link's ack timeout, a quarter of it), ms. The rig's value is the
+    /// firmware's 500 ms. On the virtual clock the firmware's own deadline
+    /// applies unchanged.
     pub stall_tolerance_ms: u32,
     /// Every event of the task loop is also sent here (recorder, live
     /// view); a closed receiver is ignored.
@@ -91,7 +163,8 @@ impl Default for SimOptions {
     fn default() -> Self {
         SimOptions {
             tactile_feedback: true,
-            speed: 1.0,
+            speed: Pace::Max,
+            injections: Vec::new(),
             status: false,
             seed: 1,
             stop: Arc::new(AtomicBool::new(false)),
@@ -254,11 +327,26 @@ struct RenderSource {
     finger: usize,
     period_ms: u64,
     next_ms: u64,
+    /// On the virtual clock: the MCU that steps the plant, caught up before
+    /// each frame.
+    world: Option<VirtualMcu>,
+    /// The camera hangs from this time on (an injected fault), ms.
+    stops_at_ms: Option<u64>,
 }
 
 impl FrameSource for RenderSource {
+    fn next_due_ms(&self) -> Option<u64> {
+        match self.stops_at_ms {
+            Some(stop) if self.next_ms >= stop => Some(u64::MAX),
+            _ => Some(self.next_ms),
+        }
+    }
+
     fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
         clock.sleep_until(self.next_ms);
+        if let Some(world) = &self.world {
+            world.catch_up();
+        }
         let t_ms = clock.now_ms();
         let contact = lock_plant(&self.plant)
             .state()
@@ -317,13 +405,28 @@ fn renderer_after_rest(
     (renderer, rest)
 }
 
+/// A simulated fingertip: its camera and its calibrated pipeline.
+struct SimSensor {
+    source: RenderSource,
+    pipeline: Pipeline,
+}
+
+impl SimSensor {
+    fn into_sensor(self) -> Sensor {
+        Sensor {
+            source: Box::new(self.source),
+            pipeline: self.pipeline,
+        }
+    }
+}
+
 fn make_sensor(
     finger: usize,
     params: &Params,
     plant: &SharedPlant,
     period_ms: u64,
     seed: u64,
-) -> Result<(Sensor, Calibration), SimError> {
+) -> Result<(SimSensor, Calibration), SimError> {
     let (renderer, rest) = renderer_after_rest(finger, params, seed);
     let calibration =
         calibrate::calibrate(&rest, params).map_err(|source| SimError::Calibration {
@@ -337,14 +440,10 @@ fn make_sensor(
         finger,
         period_ms,
         next_ms: 0,
+        world: None,
+        stops_at_ms: None,
     };
-    Ok((
-        Sensor {
-            source: Box::new(source),
-            pipeline,
-        },
-        calibration,
-    ))
+    Ok((SimSensor { source, pipeline }, calibration))
 }
 
 /// What the monitor and the collector share.
@@ -392,71 +491,122 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
         calibrations.push(c);
     }
     // Calibration done: the simulated time starts now.
-    let clock = Clock::scaled(options.speed);
-    let firmware = dexitac_firmware::Config {
-        // The host gets the same wall-clock time to send a frame as on the rig.
-        host_silence_ms: (f64::from(options.stall_tolerance_ms) * clock.speed().max(1.0)) as u32,
-        ..dexitac_firmware::Config::default()
-    };
-    let mcu = SimMcu::spawn_with_plant(
-        SimMcuConfig {
-            firmware,
-            clock: Some(clock),
-            speed: clock.speed(),
-            ..SimMcuConfig::default()
-        },
-        Arc::clone(&plant),
-    )?;
-    let link_config = LinkConfig {
-        ack_timeout_ms: u64::from(options.stall_tolerance_ms / 4).max(20),
-        ..LinkConfig::default().scaled(clock.speed())
-    };
-    let port = serialport::new(mcu.port_path().to_string_lossy(), link_config.baud)
-        .timeout(Duration::from_millis(link_config.read_timeout_ms.max(1)))
-        .open()
-        .map_err(|source| LinkError::Open {
-            path: mcu.port_path().to_path_buf(),
-            source,
-        })?;
-    let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
-        Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
-    } else {
-        Box::new(port)
-    };
-    let mut link = Link::new(port, link_config);
     let duration_ms = (scenario.duration_s * 1e3) as u64;
     let (tx, rx) = mpsc::channel();
-    let live = Mutex::new(Live::default());
-    let finished = AtomicBool::new(false);
-    let stop = AtomicBool::new(false);
-    let mut collected = Collected::default();
-    let loop_result = std::thread::scope(|scope| {
-        scope.spawn(|| {
-            monitor(
-                &clock,
+    let live = Arc::new(Mutex::new(Live::default()));
+    let stop = Arc::new(AtomicBool::new(false));
+    let run = |clock: &Clock, link: &mut Link<Box<dyn Port>>, sensors: Vec<Sensor>| {
+        let finished = AtomicBool::new(false);
+        std::thread::scope(|scope| {
+            if !clock.is_virtual() {
+                scope.spawn(|| {
+                    monitor(clock, duration_ms, &plant, &live, options, &stop, &finished)
+                });
+            }
+            let tap = options.event_tap.clone();
+            let collector = scope.spawn(|| collect(rx, &live, tap));
+            let result =
+                dexitac_rig::task_loop::run(&control, link, sensors, clock.clone(), &stop, &tx);
+            finished.store(true, Ordering::Relaxed);
+            drop(tx);
+            let collected = collector.join().unwrap_or_default();
+            (result, collected)
+        })
+    };
+    let (clock, (loop_result, collected), mcu_at_end, link_stats) = match options.speed {
+        Pace::Max => {
+            let clock = Clock::virtual_clock();
+            let mcu = VirtualMcu::new(
+                SimMcuConfig::default(),
+                Some(Arc::clone(&plant)),
+                clock.clone(),
+            );
+            for injection in &options.injections {
+                match *injection {
+                    Injection::McuResetAt { at_ms } => mcu.inject(McuInjection::ResetAt { at_ms }),
+                    Injection::ReadingOffsetAt { at_ms, offset_pa } => {
+                        mcu.inject(McuInjection::ReadingOffsetAt { at_ms, offset_pa })
+                    }
+                    Injection::CameraStopsAt { finger, at_ms } => {
+                        if let Some(s) = sensors.get_mut(finger) {
+                            s.source.stops_at_ms = Some(at_ms);
+                        }
+                    }
+                }
+            }
+            mcu.observe(end_watch(
                 duration_ms,
-                &plant,
-                &live,
-                options,
-                &stop,
-                &finished,
-            )
-        });
-        let tap = options.event_tap.clone();
-        let collector = scope.spawn(|| collect(rx, &live, tap));
-        let result = dexitac_rig::task_loop::run(&control, &mut link, sensors, clock, &stop, &tx);
-        finished.store(true, Ordering::Relaxed);
-        drop(tx);
-        if let Ok(c) = collector.join() {
-            collected = c;
+                &control.grasp_chambers,
+                Arc::clone(&stop),
+                Arc::clone(&live),
+                options.status,
+            ));
+            let link_config = LinkConfig::default();
+            let port = mcu.port(link_config.read_timeout_ms);
+            let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
+                Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
+            } else {
+                Box::new(port)
+            };
+            let mut link = Link::with_clock(port, link_config, clock.clone());
+            let sensors = sensors
+                .into_iter()
+                .map(|mut s| {
+                    s.source.world = Some(mcu.clone());
+                    s.into_sensor()
+                })
+                .collect();
+            let result = run(&clock, &mut link, sensors);
+            // The MCU applies the shutdown commands within a tick or two.
+            clock.sleep(Duration::from_millis(20));
+            (clock, result, mcu.snapshot(), link.stats())
         }
-        result
-    });
-    // Let the MCU apply the shutdown commands before reading its state.
-    std::thread::sleep(Duration::from_millis(20));
-    let mcu_at_end = mcu.snapshot();
+        Pace::Times(speed) => {
+            let clock = Clock::scaled(speed);
+            let speed = clock.speed();
+            let firmware = dexitac_firmware::Config {
+                // The host gets the same wall-clock time to send a frame as on the rig.
+                host_silence_ms: (f64::from(options.stall_tolerance_ms) * speed.max(1.0)) as u32,
+                ..dexitac_firmware::Config::default()
+            };
+            let mcu = SimMcu::spawn_with_plant(
+                SimMcuConfig {
+                    firmware,
+                    clock: Some(clock.clone()),
+                    speed,
+                    ..SimMcuConfig::default()
+                },
+                Arc::clone(&plant),
+            )?;
+            let link_config = LinkConfig {
+                // Link timeouts run on the simulated clock.
+                ack_timeout_ms: ((f64::from(options.stall_tolerance_ms / 4) * speed) as u64)
+                    .max(20),
+                ..LinkConfig::default()
+            };
+            let port = serialport::new(mcu.port_path().to_string_lossy(), link_config.baud)
+                .timeout(Duration::from_millis(link_config.read_timeout_ms.max(1)))
+                .open()
+                .map_err(|source| LinkError::Open {
+                    path: mcu.port_path().to_path_buf(),
+                    source,
+                })?;
+            let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
+                Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
+            } else {
+                Box::new(port)
+            };
+            let mut link = Link::with_clock(port, link_config, clock.clone());
+            let sensors = sensors.into_iter().map(SimSensor::into_sensor).collect();
+            let result = run(&clock, &mut link, sensors);
+            // Let the MCU apply the shutdown commands before reading its state.
+            std::thread::sleep(Duration::from_millis(20));
+            let snapshot = mcu.snapshot();
+            drop(mcu);
+            (clock, result, snapshot, link.stats())
+        }
+    };
     let sim_s = clock.now_ms() as f64 / 1e3;
-    drop(mcu);
     let plant = lock_plant(&plant);
     let report = build_report(
         scenario,
@@ -471,8 +621,48 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     Ok(SimReport {
         sim_s,
         wall_s: wall_start.elapsed().as_secs_f64(),
-        link_stats: link.stats(),
+        link_stats,
         ..report
+    })
+}
+
+/// On the virtual clock, the monitor's job, run by the MCU after every
+/// tick: ends the run at the scenario's duration or [`AFTER_END_MS`] after
+/// the object fell or the grasping chambers were all set to deflate (the
+/// host released), and prints the status line.
+fn end_watch(
+    duration_ms: u64,
+    grasp_chambers: &[usize],
+    stop: Arc<AtomicBool>,
+    live: Arc<Mutex<Live>>,
+    status: bool,
+) -> crate::mcu::TickObserver {
+    let grasp_chambers = grasp_chambers.to_vec();
+    let mut released_ms = None;
+    let mut last_status = Instant::now();
+    Box::new(move |t_ms, chambers, plant| {
+        let all_deflate = !grasp_chambers.is_empty()
+            && grasp_chambers
+                .iter()
+                .all(|&i| chambers.get(i) == Some(&ValveState::Deflate));
+        if all_deflate {
+            released_ms.get_or_insert(t_ms);
+        }
+        let ended = plant
+            .dropped_at_ms()
+            .or(released_ms)
+            .is_some_and(|t| t_ms > t + AFTER_END_MS);
+        if t_ms >= duration_ms || ended {
+            stop.store(true, Ordering::Relaxed);
+        }
+        if status && last_status.elapsed() >= STATUS_PERIOD {
+            last_status = Instant::now();
+            let (phase, centres) = {
+                let l = live.lock().unwrap_or_else(|e| e.into_inner());
+                (l.phase.clone(), l.centres)
+            };
+            eprint!("\r{}", status_line(plant.state(), &phase, &centres));
+        }
     })
 }
 

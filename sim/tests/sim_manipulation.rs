@@ -1,32 +1,21 @@
-//! The manipulation primitives end to end on the simulated rig, accelerated:
+//! The manipulation primitives end to end on the simulated rig, on the virtual clock:
 //! grasp, seal, then the primitive drives the manipulation joints through the
 //! host's task loop, the link and the firmware; its tactile guards read the
 //! rendered cameras through the pipeline. Assertions are functional (what
 //! happened, in which order); the angles come from invented plant
 //! coefficients and are only checked for being there and plausible.
 
-use std::sync::Mutex;
-
 use dexitac_gripper::manipulation::{Drive, GuardTrip, TaskEvent, MANIPULATION_CHAMBERS};
 use dexitac_protocol::{ArmState, HostMsg, ValveState, CHAMBER_COUNT};
 use dexitac_rig::task_loop::DEFAULT_GRASP_CHAMBERS;
-use dexitac_sim::rig::{run_scenario, Outcome, SimOptions, SimReport};
+use dexitac_sim::rig::{run_scenario, Outcome, Pace, SimOptions, SimReport};
 use dexitac_sim::scenario::Scenario;
 use dexitac_sim::task_report::TaskReport;
 
-/// One scenario at a time: they share two cores.
-static SERIAL: Mutex<()> = Mutex::new(());
-
-/// Simulated time per wall-clock time (as in sim_scenarios.rs).
-const SPEED: f64 = if cfg!(debug_assertions) { 1.5 } else { 3.0 };
-
+/// On the virtual clock, at the firmware's real deadlines (see sim_scenarios.rs).
 fn run(scenario: &Scenario) -> (SimReport, TaskReport) {
-    let _guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     let options = SimOptions {
-        speed: SPEED,
-        // A loaded two-core machine stalls the process at times; the
-        // host-silence trip is tested in sim_safety.rs.
-        stall_tolerance_ms: 10_000,
+        speed: Pace::Max,
         ..SimOptions::default()
     };
     let report = run_scenario(scenario, &options).expect("simulated rig");

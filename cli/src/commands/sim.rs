@@ -16,7 +16,7 @@ use crate::shared::out_dir::{self, Owned};
 use crate::shared::record::{finish_recorder, start_recorder, RecordFlags};
 use crate::shared::stop_on_ctrl_c;
 use dexitac_sim::plant::FINGER_COUNT;
-use dexitac_sim::rig::{self, SimOptions};
+use dexitac_sim::rig::{self, Pace, SimOptions};
 use dexitac_sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
 use dexitac_tactile::params::Params;
 
@@ -32,15 +32,18 @@ pub struct SimArgs {
     /// Directory for events.log, timeseries.csv, plot.png, heatmaps, summary.json.
     #[arg(long, default_value = "sim-out", value_name = "DIR")]
     out: PathBuf,
-    /// Simulated time per wall-clock time (0.1..=20).
-    #[arg(long, default_value_t = 1.0, value_parser = parse_speed)]
-    speed: f64,
+    /// `max`: virtual time, as fast as the CPU allows; the same scenario
+    /// and seed then give the same files, byte for byte. Or a factor of
+    /// real time in 0.1..=20 (the live view, soak tests).
+    #[arg(long, default_value = "1", value_parser = parse_speed, value_name = "max|FACTOR")]
+    speed: Pace,
     /// Seed of the simulated cameras' noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// The simulated board's host-silence deadline, wall-clock ms (the
-    /// firmware's is 500). Raise it only to run on a machine so busy that
-    /// the host process stalls for longer.
+    /// In real time: the simulated board's host-silence deadline,
+    /// wall-clock ms (the firmware's is 500). Raise it only to run on a
+    /// machine so busy that the host process stalls for longer. With
+    /// `--speed max` the firmware's own deadline applies.
     #[arg(long, default_value_t = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS,
           value_parser = clap::value_parser!(u32).range(50..=60_000))]
     host_silence_ms: u32,
@@ -54,13 +57,8 @@ pub struct SimArgs {
     live: LiveArgs,
 }
 
-fn parse_speed(s: &str) -> anyhow::Result<f64> {
-    let v: f64 = s.parse().map_err(|e| anyhow!("{e}"))?;
-    if v.is_finite() && (0.1..=20.0).contains(&v) {
-        Ok(v)
-    } else {
-        Err(anyhow!("speed must lie in 0.1..=20"))
-    }
+fn parse_speed(s: &str) -> anyhow::Result<Pace> {
+    Pace::parse(s).map_err(|e| anyhow!(e))
 }
 
 /// The files `dexitac sim` writes into --out.
@@ -98,12 +96,17 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
         }
         return Ok(Outcome::Success);
     }
+    if args.speed == Pace::Max && args.live.view {
+        return Err(anyhow!(
+            "the live view window runs in real time: give --speed a factor (0.1..=20), not max"
+        ));
+    }
     let scenario = Scenario::load(&args.scenario)?;
     out_dir::prepare("sim", &args.out, &OWNED)?;
     let stop = Arc::new(AtomicBool::new(false));
     stop_on_ctrl_c(&stop);
     info!(
-        "dexitac sim: scenario {} ({:.0} s simulated at {}x), tactile feedback {}",
+        "dexitac sim: scenario {} ({:.0} s simulated, speed {}), tactile feedback {}",
         scenario.name,
         scenario.duration_s,
         args.speed,

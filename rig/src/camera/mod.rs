@@ -684,9 +684,15 @@ pub fn open_camera(
     }
 }
 
-/// `instant` on `clock` (ms), `now` being the same moment as `clock.now_ms()`.
+/// `instant` on `clock` (ms), `now` being the same moment as `clock.now_ms()`
+/// (on virtual time, which wall-clock instants do not map to: now).
 pub fn clock_ms_at(clock: &Clock, instant: Instant, now: Instant) -> u64 {
-    let age_ms = now.saturating_duration_since(instant).as_secs_f64() * 1e3 * clock.speed();
+    let speed = if clock.is_virtual() {
+        0.0
+    } else {
+        clock.speed()
+    };
+    let age_ms = now.saturating_duration_since(instant).as_secs_f64() * 1e3 * speed;
     (clock.now_ms() as f64 - age_ms).max(0.0) as u64
 }
 
