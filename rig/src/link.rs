@@ -15,8 +15,8 @@
 //! - [`Link::hello`] checks the protocol version, the hard limits and the
 //!   chamber count compiled into the firmware, with a clear error on mismatch.
 //! - Telemetry and fault frames that arrive while waiting are queued and
-//!   returned by [`Link::poll`]. A board reset shows as silence (the
-//!   firmware restarts with telemetry off: [`Link::silent_for`]) or as a
+//!   returned by [`Link::poll`]. A board reset shows as telemetry silence
+//!   (the firmware restarts with telemetry off: [`Link::telemetry_silent_for`]) or as a
 //!   telemetry clock that runs backwards ([`McuEvent::McuReset`]); either
 //!   way [`Link::reconnect`] or [`Link::hello`] tells the reset cause.
 //! - [`Link::keep_alive`] sends a heartbeat when nothing was sent for
@@ -188,6 +188,7 @@ pub struct Link<P> {
     last_command_written_us: Option<u64>,
     last_mcu_time_ms: Option<u32>,
     last_rx_us: u64,
+    last_telemetry_us: u64,
     events: VecDeque<McuEvent>,
     stats: LinkStats,
     path: Option<PathBuf>,
@@ -268,6 +269,7 @@ impl<P: Port> Link<P> {
             decoder: Decoder::new(),
             next_seq: 0,
             last_rx_us: clock.now_us(),
+            last_telemetry_us: clock.now_us(),
             clock,
             last_tx_us: None,
             last_command_written_us: None,
@@ -293,6 +295,7 @@ impl<P: Port> Link<P> {
     /// heartbeat, and the silence counts from now.
     pub fn set_clock(&mut self, clock: Clock) {
         self.last_rx_us = clock.now_us();
+        self.last_telemetry_us = self.last_rx_us;
         self.last_tx_us = None;
         self.last_command_written_us = None;
         self.clock = clock;
@@ -314,6 +317,14 @@ impl<P: Port> Link<P> {
     /// telemetry periods means the MCU reset or the line is dead.
     pub fn silent_for(&self) -> Duration {
         Duration::from_micros(self.clock.now_us().saturating_sub(self.last_rx_us))
+    }
+
+    /// Time since the last telemetry report (or since the link was made or
+    /// moved to its clock). Acks keep coming from a board that restarted
+    /// (it boots with telemetry off), telemetry does not: with telemetry
+    /// on, a value of several periods means the MCU reset.
+    pub fn telemetry_silent_for(&self) -> Duration {
+        Duration::from_micros(self.clock.now_us().saturating_sub(self.last_telemetry_us))
     }
 
     /// Says hello: checks protocol version, hard limits and chamber count.
@@ -483,6 +494,7 @@ impl<P: Port> Link<P> {
                     self.events.push_back(McuEvent::McuReset);
                 }
                 self.last_mcu_time_ms = Some(t.time_ms);
+                self.last_telemetry_us = self.clock.now_us();
                 self.events.push_back(McuEvent::Telemetry(t));
             }
             McuMsg::Fault(f) => self.events.push_back(McuEvent::Fault(f)),

@@ -344,8 +344,8 @@ struct Control<'a, P> {
     last_frame_ms: [Option<u64>; SENSOR_COUNT],
     /// When closing began (the sensor watchdog's start), ms.
     closing_began_ms: Option<u64>,
-    /// The MCU was asked for telemetry.
-    telemetry_on: bool,
+    /// When the MCU was asked for telemetry, µs.
+    telemetry_on_since_us: Option<u64>,
 }
 
 impl<P: Port> Control<'_, P> {
@@ -441,7 +441,8 @@ impl<P: Port> Control<'_, P> {
         self.link.command(HostMsg::SetTelemetryInterval {
             interval_ms: self.config.telemetry_interval_ms,
         })?;
-        self.telemetry_on = self.config.telemetry_interval_ms > 0;
+        self.telemetry_on_since_us =
+            (self.config.telemetry_interval_ms > 0).then(|| self.clock.now_us());
         self.stage = Stage::Charging {
             since_ms: self.clock.now_ms(),
         };
@@ -654,8 +655,13 @@ impl<P: Port> Control<'_, P> {
                 }
             }
         }
-        let silence = self.link.silent_for();
-        if self.telemetry_on && silence > Duration::from_millis(self.config.mcu_silence_ms) {
+        let silence = self.telemetry_on_since_us.map(|since| {
+            let asked = Duration::from_micros(self.clock.now_us().saturating_sub(since));
+            self.link.telemetry_silent_for().min(asked)
+        });
+        if let Some(silence) =
+            silence.filter(|s| *s > Duration::from_millis(self.config.mcu_silence_ms))
+        {
             // Alive but without the telemetry it was asked for: it restarted
             // (telemetry is off after a boot). No answer: the link's error.
             tracing::warn!("task loop: the MCU has been silent for {silence:?}: saying hello");
@@ -761,9 +767,15 @@ impl<P: Port> Control<'_, P> {
                         })
                         .collect()
                 });
+                // The batch arrives when the last of it is done (a source
+                // may have moved the virtual time while it ran).
+                let arrived = self.clock.now_us();
                 for (i, msg) in results {
                     match msg {
-                        Some(msg) => {
+                        Some(mut msg) => {
+                            if let SensorMsg::Report { arrived_us, .. } = &mut msg {
+                                *arrived_us = arrived;
+                            }
                             self.on_sensor(msg)?;
                         }
                         None => {
@@ -825,7 +837,7 @@ pub fn run<P: Port>(
             .map(Primitive::new),
         last_frame_ms: [None; SENSOR_COUNT],
         closing_began_ms: None,
-        telemetry_on: false,
+        telemetry_on_since_us: None,
     };
     let (result, shutdown) = if clock.is_virtual() {
         let mut sensors = sensors;

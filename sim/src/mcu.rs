@@ -630,6 +630,11 @@ impl VirtualMcu {
         lock_virtual(&self.state).catch_up(self.clock.now_us());
     }
 
+    /// Runs the MCU and the plant up to `t_us` (no further than the clock).
+    pub fn catch_up_to(&self, t_us: u64) {
+        lock_virtual(&self.state).catch_up(t_us.min(self.clock.now_us()));
+    }
+
     /// The outputs and state at the clock's time.
     pub fn snapshot(&self) -> McuSnapshot {
         let mut state = lock_virtual(&self.state);

@@ -119,6 +119,15 @@ pub enum Injection {
         /// Positive and negative tank reading offsets, Pa.
         offset_pa: (i32, i32),
     },
+    /// The host hangs: fingertip 0's frame at this time takes this long
+    /// to arrive and the task loop waits for it, sending nothing (a
+    /// stalled process). The board's host-silence trip is what answers.
+    HostStallAt {
+        /// When, ms.
+        at_ms: u64,
+        /// For how long, ms.
+        for_ms: u64,
+    },
     /// A fingertip's camera stops delivering frames (it hangs, without
     /// an error).
     CameraStopsAt {
@@ -332,6 +341,9 @@ struct RenderSource {
     world: Option<VirtualMcu>,
     /// The camera hangs from this time on (an injected fault), ms.
     stops_at_ms: Option<u64>,
+    /// The frame due at or after this time takes this long (an injected
+    /// host stall): (at, for), ms.
+    stall: Option<(u64, u64)>,
 }
 
 impl FrameSource for RenderSource {
@@ -344,10 +356,22 @@ impl FrameSource for RenderSource {
 
     fn next_frame(&mut self, clock: &Clock) -> Result<Option<TimedFrame>, SourceError> {
         clock.sleep_until(self.next_ms);
-        if let Some(world) = &self.world {
-            world.catch_up();
+        if let Some((at_ms, for_ms)) = self.stall {
+            if self.next_ms >= at_ms {
+                self.stall = None;
+                clock.sleep(Duration::from_millis(for_ms));
+            }
         }
-        let t_ms = clock.now_ms();
+        // On the virtual clock the frame shows the plant at its due time,
+        // whatever else moved the clock meanwhile (the other sensor's
+        // injected stall, on its own thread).
+        let t_ms = match &self.world {
+            Some(world) => {
+                world.catch_up_to(self.next_ms * 1_000);
+                self.next_ms
+            }
+            None => clock.now_ms(),
+        };
         let contact = lock_plant(&self.plant)
             .state()
             .contacts
@@ -442,6 +466,7 @@ fn make_sensor(
         next_ms: 0,
         world: None,
         stops_at_ms: None,
+        stall: None,
     };
     Ok((SimSensor { source, pipeline }, calibration))
 }
@@ -526,6 +551,11 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
                     Injection::McuResetAt { at_ms } => mcu.inject(McuInjection::ResetAt { at_ms }),
                     Injection::ReadingOffsetAt { at_ms, offset_pa } => {
                         mcu.inject(McuInjection::ReadingOffsetAt { at_ms, offset_pa })
+                    }
+                    Injection::HostStallAt { at_ms, for_ms } => {
+                        if let Some(s) = sensors.first_mut() {
+                            s.source.stall = Some((at_ms, for_ms));
+                        }
                     }
                     Injection::CameraStopsAt { finger, at_ms } => {
                         if let Some(s) = sensors.get_mut(finger) {
