@@ -39,7 +39,17 @@ pub struct Renderer {
     light: Vec<f32>,
     noise: Vec<Vec<f32>>,
     frame_index: u64,
+    /// A marker's grey-level profile against its squared distance from
+    /// the marker's centre, sampled every [`PROFILE_STEP_PX2`] px².
+    profile: Vec<f32>,
+    /// The frames without contact, one per noise field, made when first
+    /// needed: nothing touches, so nothing changes but the noise.
+    untouched: Vec<Option<GreyFrame>>,
 }
+
+/// Sampling step of a marker's profile, px² (the profile is interpolated
+/// linearly between samples: under 0.01 grey levels off).
+const PROFILE_STEP_PX2: f64 = 1.0 / 64.0;
 
 impl Renderer {
     /// A renderer for `sensor` at `mm_per_px`, noise seeded by `seed`.
@@ -69,6 +79,14 @@ impl Renderer {
                     .collect()
             })
             .collect();
+        let (r, soft, reach) = marker_extent(&sensor);
+        let samples = ((reach * reach) as f64 / PROFILE_STEP_PX2).ceil() as usize + 2;
+        let profile = (0..samples)
+            .map(|i| {
+                let d = (i as f64 * PROFILE_STEP_PX2).sqrt();
+                (sensor.marker_contrast * soft_step(r - d, soft)) as f32
+            })
+            .collect();
         Renderer {
             rest: sensor.rest_markers(),
             sensor,
@@ -77,6 +95,8 @@ impl Renderer {
             light,
             noise,
             frame_index: 0,
+            profile,
+            untouched: vec![None; NOISE_BANK],
         }
     }
 
@@ -108,6 +128,11 @@ impl Renderer {
         let press = contact.map(|c| self.press(c));
         let noise_index = (self.frame_index % NOISE_BANK as u64) as usize;
         self.frame_index += 1;
+        if press.is_none() {
+            if let Some(Some(frame)) = self.untouched.get(noise_index) {
+                return frame.clone();
+            }
+        }
         let markers: Vec<PointPx> = self
             .rest
             .iter()
@@ -120,36 +145,57 @@ impl Renderer {
             })
             .collect();
         let noise = self.noise.get(noise_index).map(Vec::as_slice);
-        self.compose(&markers, noise)
+        let frame = self.compose(&markers, noise);
+        if press.is_none() {
+            if let Some(slot) = self.untouched.get_mut(noise_index) {
+                *slot = Some(frame.clone());
+            }
+        }
+        frame
     }
 
     fn compose(&self, markers: &[PointPx], noise: Option<&[f32]>) -> GreyFrame {
         let s = &self.sensor;
         let (w, h) = (s.width_px, s.height_px);
         let mut canvas = self.background.clone();
-        let r = s.marker_diameter_px / 2.0;
-        let soft = s.blur_sigma_px.max(0.3);
-        let reach = (r + 4.0 * soft).ceil() as i64;
+        let (_, _, reach) = marker_extent(s);
+        let reach2 = (reach * reach) as f64;
         let (wi, hi) = (w as i64, h as i64);
+        let last = self.profile.len().saturating_sub(2);
         for m in markers {
             let (cx, cy) = (m.x.round() as i64, m.y.round() as i64);
             for y in (cy - reach).max(0)..=(cy + reach).min(hi - 1) {
+                let dy = y as f64 - m.y;
+                let row = y as usize * w;
                 for x in (cx - reach).max(0)..=(cx + reach).min(wi - 1) {
-                    let d = (x as f64 - m.x).hypot(y as f64 - m.y);
-                    let v = s.marker_contrast * soft_step(r - d, soft);
-                    canvas[y as usize * w + x as usize] += v as f32;
+                    let dx = x as f64 - m.x;
+                    let d2 = dx * dx + dy * dy;
+                    if d2 > reach2 {
+                        continue;
+                    }
+                    // Linear interpolation in the sampled profile.
+                    let f = d2 / PROFILE_STEP_PX2;
+                    let i = (f as usize).min(last);
+                    let t = (f - i as f64) as f32;
+                    let (a, b) = (self.profile[i], self.profile[i + 1]);
+                    canvas[row + x as usize] += a + (b - a) * t;
                 }
             }
         }
-        let data = canvas
-            .iter()
-            .zip(&self.light)
-            .enumerate()
-            .map(|(i, (&v, &l))| {
-                let n = noise.and_then(|n| n.get(i)).copied().unwrap_or(0.0);
-                (v * l + n).round().clamp(0.0, 255.0) as u8
-            })
-            .collect();
+        let quantise = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
+        let data = match noise {
+            Some(noise) if noise.len() == canvas.len() => canvas
+                .iter()
+                .zip(&self.light)
+                .zip(noise)
+                .map(|((&v, &l), &n)| quantise(v * l + n))
+                .collect(),
+            _ => canvas
+                .iter()
+                .zip(&self.light)
+                .map(|(&v, &l)| quantise(v * l))
+                .collect(),
+        };
         // Invariant: the canvas has exactly w * h pixels, and the sensor's
         // size was accepted by the synthetic renderer's checks.
         GreyFrame::new(w, h, data).unwrap_or_else(|_| blank(w, h))
@@ -160,6 +206,14 @@ impl Renderer {
 fn blank(w: usize, h: usize) -> GreyFrame {
     GreyFrame::new(w.max(1), h.max(1), vec![0; w.max(1) * h.max(1)])
         .unwrap_or_else(|_| blank(640, 480))
+}
+
+/// A marker's radius and edge softness, px, and how far from its centre it
+/// is drawn, whole px.
+fn marker_extent(s: &SensorSpec) -> (f64, f64, i64) {
+    let r = s.marker_diameter_px / 2.0;
+    let soft = s.blur_sigma_px.max(0.3);
+    (r, soft, (r + 4.0 * soft).ceil() as i64)
 }
 
 /// Same edge as [`dexitac_tactile::synth`]'s renderer.
