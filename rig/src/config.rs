@@ -166,6 +166,12 @@ pub struct ControlSection {
     pub open_loop_close_ms: u64,
     /// Telemetry period asked of the board, ms.
     pub telemetry_interval_ms: u16,
+    /// A fingertip camera without a frame this long once closing began
+    /// ends the run sealed and disarmed, ms (task loop, "Watchdogs").
+    pub sensor_timeout_ms: u64,
+    /// The board without telemetry this long is asked whether it
+    /// restarted, ms (task loop, "Watchdogs").
+    pub mcu_silence_ms: u64,
 }
 
 impl Default for ControlSection {
@@ -175,6 +181,8 @@ impl Default for ControlSection {
             tactile_feedback: c.tactile_feedback,
             open_loop_close_ms: c.open_loop_close_ms,
             telemetry_interval_ms: c.telemetry_interval_ms,
+            sensor_timeout_ms: c.sensor_timeout_ms,
+            mcu_silence_ms: c.mcu_silence_ms,
         }
     }
 }
@@ -456,6 +464,22 @@ impl<S> RigConfig<S> {
                 "must be positive".into(),
             ));
         }
+        let telemetry_ms = u64::from(self.control.telemetry_interval_ms);
+        if self.control.mcu_silence_ms < 3 * telemetry_ms {
+            return Err(invalid(
+                "control.mcu_silence_ms",
+                format!(
+                    "must be at least 3 telemetry periods ({} ms)",
+                    3 * telemetry_ms
+                ),
+            ));
+        }
+        if self.control.sensor_timeout_ms == 0 {
+            return Err(invalid(
+                "control.sensor_timeout_ms",
+                "must be positive".into(),
+            ));
+        }
         if self.fingertip.len() > SENSOR_COUNT {
             return Err(invalid(
                 "fingertip",
@@ -489,6 +513,8 @@ impl<S> RigConfig<S> {
             telemetry_interval_ms: self.control.telemetry_interval_ms,
             tactile_feedback: self.control.tactile_feedback,
             open_loop_close_ms: self.control.open_loop_close_ms,
+            sensor_timeout_ms: self.control.sensor_timeout_ms,
+            mcu_silence_ms: self.control.mcu_silence_ms,
             task: self.task.clone(),
             ..ControlConfig::default()
         }

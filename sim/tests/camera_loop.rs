@@ -56,28 +56,37 @@ fn fake_sensors(
     cam_tx: &mpsc::Sender<CameraEvent>,
 ) -> Vec<Sensor> {
     let sensor = SensorSpec::nominal(640, 480);
+    // Everything slow first (rendering, encoding, calibrating): a camera
+    // plays from the moment it is opened, so opening camera 0 before
+    // camera 1's frames were made once let its unplug pass before the loop
+    // had started, on a loaded machine.
+    let prepared: Vec<_> = (0..2u64)
+        .map(|finger| {
+            let rest = mjpeg(&synth::rest_frame(&sensor, 100 + finger).image);
+            let cal = calibrate::calibrate(&[through_camera(&rest, params)], params).unwrap();
+            let pressed: Vec<Vec<u8>> = (0..4)
+                .map(|seed| {
+                    mjpeg(
+                        &synth::render(&Scene {
+                            sensor: sensor.clone(),
+                            presses: vec![Press {
+                                centre: PointPx::new(300.0 + 20.0 * finger as f64, 240.0),
+                                width_px: 25.0,
+                                strength: 0.6,
+                                shear_px: PointPx::new(0.0, 0.0),
+                            }],
+                            dropout: 0.0,
+                            seed: 10 * finger + seed,
+                        })
+                        .image,
+                    )
+                })
+                .collect();
+            (cal, pressed)
+        })
+        .collect();
     let mut sensors = Vec::new();
-    for finger in 0..2u64 {
-        let rest = mjpeg(&synth::rest_frame(&sensor, 100 + finger).image);
-        let cal = calibrate::calibrate(&[through_camera(&rest, params)], params).unwrap();
-        let pressed: Vec<Vec<u8>> = (0..4)
-            .map(|seed| {
-                mjpeg(
-                    &synth::render(&Scene {
-                        sensor: sensor.clone(),
-                        presses: vec![Press {
-                            centre: PointPx::new(300.0 + 20.0 * finger as f64, 240.0),
-                            width_px: 25.0,
-                            strength: 0.6,
-                            shear_px: PointPx::new(0.0, 0.0),
-                        }],
-                        dropout: 0.0,
-                        seed: 10 * finger + seed,
-                    })
-                    .image,
-                )
-            })
-            .collect();
+    for (finger, (cal, pressed)) in prepared.into_iter().enumerate() {
         let mut fake = FakeDevice::new(PixelFormat::Mjpeg, 640, 480, pressed)
             .named(&format!("fake{finger}"))
             .period(Duration::from_millis(33));
@@ -110,7 +119,12 @@ struct LoopRun {
 
 /// Runs the task loop on `sensors` against a simulated board until `stop`
 /// is set `after` the start.
-fn run_loop(sensors: Vec<Sensor>, stop: &Arc<AtomicBool>, after: Duration) -> LoopRun {
+fn run_loop(
+    config: &ControlConfig,
+    sensors: Vec<Sensor>,
+    stop: &Arc<AtomicBool>,
+    after: Duration,
+) -> LoopRun {
     let mcu = SimMcu::spawn(SimMcuConfig::default()).unwrap();
     let mut link = Link::open(mcu.port_path(), LinkConfig::default()).unwrap();
     let stopper = {
@@ -122,14 +136,7 @@ fn run_loop(sensors: Vec<Sensor>, stop: &Arc<AtomicBool>, after: Duration) -> Lo
     };
     let (tx, events) = mpsc::channel();
     let t0 = std::time::Instant::now();
-    let result = dexitac_rig::task_loop::run(
-        &ControlConfig::default(),
-        &mut link,
-        sensors,
-        Clock::wall(),
-        stop,
-        &tx,
-    );
+    let result = dexitac_rig::task_loop::run(config, &mut link, sensors, Clock::wall(), stop, &tx);
     let took = t0.elapsed();
     stopper.join().unwrap();
     LoopRun {
@@ -151,7 +158,12 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
         Some(stop.clone()),
         &cam_tx,
     );
-    let run = run_loop(sensors, &stop, Duration::from_millis(2_000));
+    let run = run_loop(
+        &ControlConfig::default(),
+        sensors,
+        &stop,
+        Duration::from_millis(2_000),
+    );
     assert_eq!(run.result.unwrap(), StopReason::Requested);
     let camera_events: Vec<CameraEvent> = cam_rx.try_iter().collect();
     assert!(
@@ -200,7 +212,14 @@ fn the_loop_ends_promptly_while_a_camera_is_lost() {
     let (cam_tx, _cam_rx) = mpsc::channel();
     let sensors = fake_sensors(&params, (10, Duration::from_secs(3600)), None, &cam_tx);
     let stop = Arc::new(AtomicBool::new(false));
-    let run = run_loop(sensors, &stop, Duration::from_millis(1_500));
+    // The stop request is under test, not the sensor watchdog (which would
+    // end the run on its own 500 ms after closing began: its test is
+    // sim/tests/runtime_safety.rs).
+    let config = ControlConfig {
+        sensor_timeout_ms: u64::MAX,
+        ..ControlConfig::default()
+    };
+    let run = run_loop(&config, sensors, &stop, Duration::from_millis(1_500));
     assert_eq!(run.result.unwrap(), StopReason::Requested);
     assert!(
         run.took < Duration::from_secs(30),
