@@ -321,6 +321,55 @@ fn sensor_thread(
     let _ = tx.send(SensorMsg::Ended);
 }
 
+/// A pass of the threaded loop slower than this (wall clock) is logged
+/// with where its time went, ms.
+const SLOW_PASS_MS: u64 = 50;
+
+/// Wall-clock times of one pass of the threaded loop, to say where a stall
+/// went (a slow pass is logged as a warning).
+struct PassPhases {
+    start: std::time::Instant,
+    marks: [Duration; 3],
+    frames: usize,
+}
+
+impl PassPhases {
+    fn start() -> Self {
+        PassPhases {
+            start: std::time::Instant::now(),
+            marks: [Duration::ZERO; 3],
+            frames: 0,
+        }
+    }
+
+    fn waited(&mut self) {
+        self.marks[0] = self.start.elapsed();
+    }
+
+    fn sensors_done(&mut self) {
+        self.marks[1] = self.start.elapsed();
+    }
+
+    fn time_done(&mut self) {
+        self.marks[2] = self.start.elapsed();
+    }
+
+    fn finish(&self, t_ms: u64) {
+        let total = self.start.elapsed();
+        if total > Duration::from_millis(SLOW_PASS_MS) {
+            let [waited, sensors, time] = self.marks;
+            tracing::warn!(
+                "task loop: a pass at {:.3} s took {total:.1?}: waiting for frames {waited:.1?}, {} frame(s) and their commands {:.1?}, timers {:.1?}, board (heartbeat, telemetry) {:.1?}",
+                t_ms as f64 / 1e3,
+                self.frames,
+                sensors.saturating_sub(waited),
+                time.saturating_sub(sensors),
+                total.saturating_sub(time),
+            );
+        }
+    }
+}
+
 /// Where the loop is.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Stage {
@@ -688,37 +737,46 @@ impl<P: Port> Control<'_, P> {
     ) -> Result<StopReason, RuntimeError> {
         self.setup()?;
         let mut live = SENSOR_COUNT;
-        // Wake often enough to keep the heartbeat well inside its period.
-        let wait = Duration::from_millis((self.link.config().heartbeat_ms / 4).clamp(1, 10));
+        // Wake often enough to keep the heartbeat well inside its period
+        // (its period is clock time; this wait is wall-clock time).
+        let speed = self.clock.speed().max(1.0);
+        let wait =
+            Duration::from_secs_f64(self.link.config().heartbeat_ms as f64 / 4.0 / speed / 1e3)
+                .clamp(Duration::from_millis(1), Duration::from_millis(10));
         let mut last_pass_us = self.clock.now_us();
         loop {
             self.pass(&mut last_pass_us);
             if stop.load(Ordering::Relaxed) {
                 return Ok(StopReason::Requested);
             }
-            match rx.recv_timeout(wait) {
+            let mut phases = PassPhases::start();
+            let received = rx.recv_timeout(wait);
+            phases.waited();
+            match received {
                 Ok(msg) => {
-                    if !self.on_sensor(msg)? {
-                        live = live.saturating_sub(1);
-                        if live == 0 {
-                            return Ok(StopReason::FramesEnded);
-                        }
-                    }
-                    // Drain what queued up while this frame was handled.
-                    while let Ok(msg) = rx.try_recv() {
-                        if !self.on_sensor(msg)? {
+                    let mut handled = 0;
+                    // This frame, then what queued up while it was handled.
+                    for msg in std::iter::once(msg).chain(std::iter::from_fn(|| rx.try_recv().ok()))
+                    {
+                        if self.on_sensor(msg)? {
+                            handled += 1;
+                        } else {
                             live = live.saturating_sub(1);
                         }
                     }
                     if live == 0 {
                         return Ok(StopReason::FramesEnded);
                     }
+                    phases.frames = handled;
                 }
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => return Ok(StopReason::FramesEnded),
             }
+            phases.sensors_done();
             self.on_time()?;
+            phases.time_done();
             self.on_mcu()?;
+            phases.finish(self.clock.now_ms());
         }
     }
 

@@ -24,6 +24,10 @@
 //! outputs, on the same simulated clock as the host's loop
 //! ([`SimMcuConfig::clock`]). The plant's time keeps running across an MCU
 //! reset; the firmware's own clock restarts from zero.
+//!
+//! [`VirtualMcu`] is the same core on a virtual clock, for runs that repeat
+//! exactly: no thread and no pty, it runs when its [`VirtualPort`] is read
+//! or written, and faults can be scheduled into it ([`McuInjection`]).
 
 use std::collections::VecDeque;
 use std::io::{self, Write};
@@ -563,7 +567,7 @@ impl VirtualState {
         self.line_free_us.1 = at;
     }
 
-    fn from_host(&mut self, t_us: u64, bytes: &[u8]) {
+    fn queue_from_host(&mut self, t_us: u64, bytes: &[u8]) {
         let at = self.line_free_us.0.max(t_us) + BYTE_TIME_US * bytes.len() as u64;
         self.line_free_us.0 = at;
         self.to_mcu.push_back((at, bytes.to_vec()));
@@ -695,7 +699,7 @@ impl Write for VirtualPort {
         let now_us = self.mcu.clock.now_us();
         let mut state = lock_virtual(&self.mcu.state);
         state.catch_up(now_us);
-        state.from_host(now_us, buf);
+        state.queue_from_host(now_us, buf);
         Ok(buf.len())
     }
 

@@ -44,7 +44,7 @@ pub struct Renderer {
     profile: Vec<f32>,
     /// The frames without contact, one per noise field, made when first
     /// needed: nothing touches, so nothing changes but the noise.
-    untouched: Vec<Option<GreyFrame>>,
+    untouched: Vec<Option<Vec<u8>>>,
 }
 
 /// Sampling step of a marker's profile, px² (the profile is interpolated
@@ -124,50 +124,98 @@ impl Renderer {
     }
 
     /// Renders the next frame with `contact` (None: nothing touches).
+    ///
+    /// Only what the contact changes is drawn: the frame without contact
+    /// for this frame's noise field is made once, and a contact redraws the
+    /// box around the markers it moves by more than [`MOVED_PX`].
     pub fn render(&mut self, contact: Option<&ContactState>) -> GreyFrame {
         let press = contact.map(|c| self.press(c));
         let noise_index = (self.frame_index % NOISE_BANK as u64) as usize;
         self.frame_index += 1;
-        if press.is_none() {
-            if let Some(Some(frame)) = self.untouched.get(noise_index) {
-                return frame.clone();
-            }
-        }
-        let markers: Vec<PointPx> = self
-            .rest
-            .iter()
-            .map(|&p| match &press {
-                Some(press) => {
+        let (w, h) = (self.sensor.width_px, self.sensor.height_px);
+        let mut data = self.untouched(noise_index);
+        if let Some(press) = press {
+            let mut moved: Option<[f64; 4]> = None;
+            let markers: Vec<PointPx> = self
+                .rest
+                .iter()
+                .map(|&p| {
                     let u = press.displacement(p);
-                    PointPx::new(p.x + u.x, p.y + u.y)
-                }
-                None => p,
-            })
-            .collect();
-        let noise = self.noise.get(noise_index).map(Vec::as_slice);
-        let frame = self.compose(&markers, noise);
-        if press.is_none() {
-            if let Some(slot) = self.untouched.get_mut(noise_index) {
-                *slot = Some(frame.clone());
+                    let q = PointPx::new(p.x + u.x, p.y + u.y);
+                    if u.x.hypot(u.y) > MOVED_PX {
+                        let b = moved.get_or_insert([p.x, p.y, p.x, p.y]);
+                        *b = [
+                            b[0].min(p.x).min(q.x),
+                            b[1].min(p.y).min(q.y),
+                            b[2].max(p.x).max(q.x),
+                            b[3].max(p.y).max(q.y),
+                        ];
+                    }
+                    q
+                })
+                .collect();
+            if let Some([x0, y0, x1, y1]) = moved {
+                let (_, _, reach) = marker_extent(&self.sensor);
+                let pad = reach as f64 + 1.0;
+                let region = Region {
+                    x0: (x0 - pad).floor().clamp(0.0, w as f64) as usize,
+                    y0: (y0 - pad).floor().clamp(0.0, h as f64) as usize,
+                    x1: (x1 + pad).ceil().clamp(0.0, w as f64) as usize,
+                    y1: (y1 + pad).ceil().clamp(0.0, h as f64) as usize,
+                };
+                self.compose(&markers, noise_index, region, &mut data);
             }
         }
-        frame
+        // Invariant: the data has exactly w * h pixels, and the sensor's
+        // size was accepted by the synthetic renderer's checks.
+        GreyFrame::new(w, h, data).unwrap_or_else(|_| blank(w, h))
     }
 
-    fn compose(&self, markers: &[PointPx], noise: Option<&[f32]>) -> GreyFrame {
+    /// The pixels of the frame without contact for noise field `index`
+    /// (made when first needed).
+    fn untouched(&mut self, index: usize) -> Vec<u8> {
+        if let Some(Some(data)) = self.untouched.get(index) {
+            return data.clone();
+        }
+        let (w, h) = (self.sensor.width_px, self.sensor.height_px);
+        let mut data = vec![0; w * h];
+        let whole = Region {
+            x0: 0,
+            y0: 0,
+            x1: w,
+            y1: h,
+        };
+        let rest = self.rest.clone();
+        self.compose(&rest, index, whole, &mut data);
+        if let Some(slot) = self.untouched.get_mut(index) {
+            *slot = Some(data.clone());
+        }
+        data
+    }
+
+    /// Draws `region` of the frame with `markers` and noise field
+    /// `noise_index` into `data` (w * h pixels).
+    fn compose(&self, markers: &[PointPx], noise_index: usize, region: Region, data: &mut [u8]) {
         let s = &self.sensor;
-        let (w, h) = (s.width_px, s.height_px);
-        let mut canvas = self.background.clone();
+        let w = s.width_px;
+        let Region { x0, y0, x1, y1 } = region;
+        if x1 <= x0 || y1 <= y0 {
+            return;
+        }
+        let rw = x1 - x0;
+        let mut canvas: Vec<f32> = (y0..y1)
+            .flat_map(|y| self.background[y * w + x0..y * w + x1].iter().copied())
+            .collect();
         let (_, _, reach) = marker_extent(s);
         let reach2 = (reach * reach) as f64;
-        let (wi, hi) = (w as i64, h as i64);
         let last = self.profile.len().saturating_sub(2);
+        let (rx0, ry0, rx1, ry1) = (x0 as i64, y0 as i64, x1 as i64 - 1, y1 as i64 - 1);
         for m in markers {
             let (cx, cy) = (m.x.round() as i64, m.y.round() as i64);
-            for y in (cy - reach).max(0)..=(cy + reach).min(hi - 1) {
+            for y in (cy - reach).max(ry0)..=(cy + reach).min(ry1) {
                 let dy = y as f64 - m.y;
-                let row = y as usize * w;
-                for x in (cx - reach).max(0)..=(cx + reach).min(wi - 1) {
+                let row = (y - ry0) as usize * rw;
+                for x in (cx - reach).max(rx0)..=(cx + reach).min(rx1) {
                     let dx = x as f64 - m.x;
                     let d2 = dx * dx + dy * dy;
                     if d2 > reach2 {
@@ -178,28 +226,51 @@ impl Renderer {
                     let i = (f as usize).min(last);
                     let t = (f - i as f64) as f32;
                     let (a, b) = (self.profile[i], self.profile[i + 1]);
-                    canvas[row + x as usize] += a + (b - a) * t;
+                    canvas[row + (x - rx0) as usize] += a + (b - a) * t;
                 }
             }
         }
         let quantise = |v: f32| (v.clamp(0.0, 255.0) + 0.5) as u8;
-        let data = match noise {
-            Some(noise) if noise.len() == canvas.len() => canvas
-                .iter()
-                .zip(&self.light)
-                .zip(noise)
-                .map(|((&v, &l), &n)| quantise(v * l + n))
-                .collect(),
-            _ => canvas
-                .iter()
-                .zip(&self.light)
-                .map(|(&v, &l)| quantise(v * l))
-                .collect(),
-        };
-        // Invariant: the canvas has exactly w * h pixels, and the sensor's
-        // size was accepted by the synthetic renderer's checks.
-        GreyFrame::new(w, h, data).unwrap_or_else(|_| blank(w, h))
+        let noise = self
+            .noise
+            .get(noise_index)
+            .filter(|n| n.len() == self.light.len());
+        for (ry, y) in (y0..y1).enumerate() {
+            let span = y * w + x0..y * w + x1;
+            let out = &mut data[span.clone()];
+            let values = &canvas[ry * rw..(ry + 1) * rw];
+            let light = &self.light[span.clone()];
+            match noise {
+                Some(noise) => {
+                    for ((o, (&v, &l)), &n) in out
+                        .iter_mut()
+                        .zip(values.iter().zip(light))
+                        .zip(&noise[span])
+                    {
+                        *o = quantise(v * l + n);
+                    }
+                }
+                None => {
+                    for (o, (&v, &l)) in out.iter_mut().zip(values.iter().zip(light)) {
+                        *o = quantise(v * l);
+                    }
+                }
+            }
+        }
     }
+}
+
+/// A marker moved less than this by a contact is left as drawn without
+/// contact, px (at most about 0.05 grey levels off).
+const MOVED_PX: f64 = 1e-3;
+
+/// A box of pixels, `x0..x1` by `y0..y1`.
+#[derive(Debug, Clone, Copy)]
+struct Region {
+    x0: usize,
+    y0: usize,
+    x1: usize,
+    y1: usize,
 }
 
 /// A black frame (only reached for a sensor size the frame type refuses).
@@ -254,6 +325,45 @@ mod tests {
             .map(|(a, b)| a.abs_diff(*b))
             .max();
         assert!(worst.is_some_and(|d| d <= 1), "{worst:?}");
+    }
+
+    #[test]
+    fn drawing_only_the_moved_box_matches_a_whole_redraw() {
+        let mut r = Renderer::new(SensorSpec::nominal(320, 240), 0.2, 3);
+        let c = contact();
+        // Frame 0 without contact, frame 1 with: noise fields 0 and 1.
+        let untouched = r.render(None);
+        let pressed = r.render(Some(&c));
+        let press = r.press(&c);
+        let moved: Vec<PointPx> = r
+            .rest
+            .iter()
+            .map(|&p| {
+                let u = press.displacement(p);
+                PointPx::new(p.x + u.x, p.y + u.y)
+            })
+            .collect();
+        let whole = Region {
+            x0: 0,
+            y0: 0,
+            x1: 320,
+            y1: 240,
+        };
+        let (mut full, mut rest) = (vec![0; 320 * 240], vec![0; 320 * 240]);
+        r.compose(&moved, 1, whole, &mut full);
+        r.compose(&r.rest.clone(), 0, whole, &mut rest);
+        assert_eq!(untouched.data(), &rest[..]);
+        let worst = pressed
+            .data()
+            .iter()
+            .zip(&full)
+            .map(|(a, b)| a.abs_diff(*b))
+            .max();
+        assert!(worst.is_some_and(|d| d <= 1), "{worst:?}");
+        // The contact did change the frame (against the same noise field).
+        let mut rest1 = vec![0; 320 * 240];
+        r.compose(&r.rest.clone(), 1, whole, &mut rest1);
+        assert!(pressed.data() != &rest1[..]);
     }
 
     #[test]

@@ -1,20 +1,31 @@
 //! The whole simulated rig around the host's real task loop: a scenario in,
 //! a [`SimReport`] out.
 //!
-//! [`run_scenario`] starts the simulated MCU with the plant
-//! ([`crate::mcu::SimMcu::spawn_with_plant`]), opens its pty with the
-//! normal [`dexitac_rig::link::Link`], gives each fingertip a rendered frame source
-//! ([`crate::render`]) and a pipeline calibrated on its rest frame, and
-//! runs [`dexitac_rig::task_loop::run`] on a clock `speed` times faster than the wall
-//! clock. A monitor thread ends the run at the scenario's duration, shortly
-//! after the object fell or was released, or when the caller's stop flag is
-//! set (Ctrl-C).
+//! [`run_scenario`] gives each fingertip a rendered frame source
+//! ([`crate::render`]) and a pipeline calibrated on its rest frames, connects
+//! the normal [`dexitac_rig::link::Link`] to a simulated MCU that steps the
+//! plant, and runs [`dexitac_rig::task_loop::run`]. The run ends at the
+//! scenario's duration, [`AFTER_END_MS`] after the object fell or the host
+//! released it, or when the caller's stop flag is set (Ctrl-C).
 //!
-//! Above real time (`speed > 1`) the firmware's host-silence deadline is
-//! scaled by the speed: the host keeps the 500 ms of *wall-clock* time it
-//! has on the rig ([`SimOptions::stall_tolerance_ms`]), so the scheduling
-//! jitter of a busy PC does not trip the simulated board any more than it
-//! would trip the real one. At `speed = 1` the firmware's default applies.
+//! # Pace
+//!
+//! - [`Pace::Max`] (the tests, `dexitac sim --speed max`): one virtual clock
+//!   ([`Clock::virtual_clock`]) for the task loop, the link, the MCU, the
+//!   plant and the cameras. The MCU is a [`VirtualMcu`]: no thread, no pty;
+//!   it catches up with the clock whenever the link reads or writes, and
+//!   checks the end of the run after every tick. The firmware's own
+//!   deadlines (host silence, pump run time) apply at their real values,
+//!   and the same scenario and seed give the same run, event for event.
+//!   Faults can be injected ([`SimOptions::injections`]).
+//! - [`Pace::Times`] (the live view, soak tests): real time, `speed` times
+//!   faster; the MCU runs on its own thread behind a pty
+//!   ([`SimMcu::spawn_with_plant`]) and a monitor thread ends the run. Above
+//!   real time the firmware's host-silence deadline is scaled by the speed:
+//!   the host keeps the 500 ms of *wall-clock* time it has on the rig
+//!   ([`SimOptions::stall_tolerance_ms`]), so the scheduling jitter of a busy
+//!   PC does not trip the simulated board any more than it would trip the
+//!   real one.
 //!
 //! # Outcome
 //!
