@@ -5,7 +5,7 @@
 //! | code | meaning |
 //! | --- | --- |
 //! | 0 | success; `sensor health`: pass |
-//! | 1 | the command ran to its end but the result is negative: `analyze` could not read some frames, `replay` found different centres, `view` lost a sensor, `sim`/`run` ended on a failed task loop (trip, link), `sensor tune` found no exact pin count, `cameras` found none, `faults` left faults latched, `calibrate` applied a calibration it could not store or found the stored record ignored; `sensor health`: warn |
+//! | 1 | the command ran to its end but the result is negative: `analyze` could not read some frames, `replay` found different centres, `view` lost a sensor, `sim`/`run` ended on a failed task loop (MCU trip or reset, link, sensor; `sim` says `FAILED: <status>` on its last stdout line and in `summary.json`'s `status`), `sensor tune` found no exact pin count, `cameras` found none, `faults` left faults latched, `calibrate` applied a calibration it could not store or found the stored record ignored; `sensor health`: warn |
 //! | 2 | error: bad arguments, config, input or output, device, link; `sensor health`: fail |
 //! | 3 | `sensor health` could not run its check |
 
@@ -16,9 +16,10 @@ pub const EXIT_CODES_HELP: &str = "\
 Exit codes:
   0  success (sensor health: pass)
   1  ran to its end, result negative: analyze could not read some frames, replay found
-     different centres, view lost a sensor, sim/run ended on a failed task loop, sensor tune
-     found no exact pin count, cameras found none, faults left faults latched, calibrate
-     could not store the calibration or found the stored record ignored (sensor health: warn)
+     different centres, view lost a sensor, sim/run ended on a failed task loop (trip, MCU
+     reset, link, sensor; sim's last line starts with FAILED), sensor tune found no exact pin
+     count, cameras found none, faults left faults latched, calibrate could not store the
+     calibration or found the stored record ignored (sensor health: warn)
   2  error: bad arguments, config, input or output, device, link (sensor health: fail)
   3  sensor health could not run its check";
 

@@ -45,6 +45,10 @@ fn out_of_range_speed_is_refused() {
     assert!(stderr(&o).contains("speed"), "{}", stderr(&o));
     let o = dexitac(&["sim", "--speed", "NaN"]);
     assert_eq!(o.status.code(), Some(2));
+    // The window shows real time; virtual time has no pace to show.
+    let o = dexitac(&["sim", "--speed", "max", "--view"]);
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("real time"), "{}", stderr(&o));
 }
 
 #[test]

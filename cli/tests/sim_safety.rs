@@ -169,6 +169,78 @@ fn ctrl_c_leaves_the_gripper_sealed_and_disarmed() {
     assert!(!s.pumps.positive_on && !s.pumps.negative_on);
 }
 
+/// `dexitac sim` on a board whose host-silence deadline (50 ms) is shorter
+/// than the link's heartbeat period (100 ms): the board trips on host
+/// silence a moment after it is armed, long before the scenario's pokes
+/// (12, 18, 24 s). Every output says the run failed, and none reports a
+/// poke as having happened.
+#[test]
+fn a_tripped_sim_run_says_so_in_every_output() {
+    let _serial = serial();
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("out");
+    let o = Command::new(env!("CARGO_BIN_EXE_dexitac"))
+        .args(["sim", "--scenario", "disturbance", "--no-tactile"])
+        .args(["--host-silence-ms", "50", "--out"])
+        .arg(&out)
+        .output()
+        .expect("run dexitac sim");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(o.status.code(), Some(1), "{stdout}\n{stderr}");
+    // The last line on stdout states the failure first.
+    let last = stdout.lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("FAILED: tripped: HostSilence at "),
+        "{stdout}"
+    );
+    assert!(last.contains("0 of 3 poke(s) before the end"), "{last}");
+    assert!(!stdout.contains("outcome held"), "{stdout}");
+
+    let read = |name: &str| std::fs::read_to_string(out.join(name)).expect(name);
+    let summary: serde_json::Value = serde_json::from_str(&read("summary.json")).expect("json");
+    let status = summary["status"].as_str().expect("status");
+    assert!(status.starts_with("tripped: HostSilence at "), "{summary}");
+    assert!(last.starts_with(&format!("FAILED: {status}; ")), "{last}");
+    assert_eq!(summary["outcome"], "failed");
+    assert_eq!(summary["disturbances"], serde_json::json!([]));
+    assert_eq!(
+        summary["pokes_not_reached"].as_array().map(Vec::len),
+        Some(3)
+    );
+    let end_s = summary["sim_s"].as_f64().expect("sim_s");
+    assert!(end_s < 12.0, "{summary}");
+
+    // events.log: nothing after the end, no poke onset, the end says FAILED.
+    let log = read("events.log");
+    let lines: Vec<&str> = log.lines().filter(|l| !l.starts_with('#')).collect();
+    for line in &lines {
+        let t: f64 = line
+            .split(" s  ")
+            .next()
+            .and_then(|t| t.trim().parse().ok())
+            .unwrap_or_else(|| panic!("no time: {line:?}"));
+        assert!(
+            t <= end_s + 1e-9,
+            "{line:?} after the end {end_s} s:\n{log}"
+        );
+    }
+    assert!(!log.contains("poke onset"), "{log}");
+    let end = lines.last().copied().unwrap_or_default();
+    assert!(end.contains(&format!("end: FAILED: {status}; ")), "{log}");
+
+    // timeseries.csv ends with the run; the figure was drawn.
+    let csv = read("timeseries.csv");
+    let last_t: f64 = csv
+        .lines()
+        .last()
+        .and_then(|l| l.split(',').next())
+        .and_then(|t| t.parse().ok())
+        .expect("a row");
+    assert!(last_t <= end_s + 1e-9, "{last_t} > {end_s}");
+    assert!(out.join("plot.png").exists());
+}
+
 #[test]
 fn line_corruption_never_causes_a_wrong_valve_action() {
     let _serial = serial();

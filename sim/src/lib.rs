@@ -11,6 +11,8 @@
 //!   files (`dexitac sim --out DIR`; the figures are the view crate's).
 //! - [`line`](mod@line) makes the serial line noisy (corruption tests).
 //! - [`task_report`] measures what a manipulation task achieved.
+//! - [`status`] says whether a run ended normally and which pokes it
+//!   reached, for every output of a run.
 #![warn(missing_docs)]
 
 pub mod line;
@@ -20,4 +22,5 @@ pub mod plant;
 pub mod render;
 pub mod rig;
 pub mod scenario;
+pub mod status;
 pub mod task_report;

@@ -4,11 +4,41 @@
 //! - `events.log`: for people. One line per event, time-ordered: time in s,
 //!   then what happened in words, with units (N, s, kPa, mm): pokes,
 //!   Algorithm 1's decisions and their causes, commands sent to the board,
-//!   valve output changes, a drop, the end. No Rust debug output.
-//! - `timeseries.csv`: the columns below ([`write_timeseries`]).
+//!   valve output changes, a drop, the end. No Rust debug output. The last
+//!   line is the end: `end: ok, outcome held, ...`, or for a failed run
+//!   `end: FAILED: <status>; object held at the end; task loop failed:
+//!   <message>; MCU tripped (faults: ...)`. No line is timed after the end:
+//!   scheduled pokes the run did not reach are one line at the end's time
+//!   (`not reached, the run ended first: ...`), not poke onsets.
+//! - `timeseries.csv`: the columns below ([`write_timeseries`]), up to the
+//!   end of the run.
 //! - `summary.json`: the run in numbers ([`Summary`]; the fields' docs give
 //!   each key's meaning and unit). Times in s, rounded to 1 ms; numbers
 //!   that are not finite are `null`.
+//!
+//! # Failed runs
+//!
+//! A run *fails* when its task loop did not end normally
+//! ([`SimReport::loop_result`] is an error: the MCU tripped or reset, the
+//! link or a sensor failed). Every output says so ([`crate::status`]):
+//!
+//! - `summary.json`: `status` is `ok` for a run that did not fail, else the
+//!   failure in words with its simulated time (a trip's from the MCU's fault
+//!   event, else the end of the run): `tripped: HostSilence at 11.3 s`,
+//!   `MCU reset at 4.2 s`, `error: <message>`; `outcome` is `failed` (never `held`), and
+//!   `object_at_end` keeps what became of the object (`held`, `dropped`,
+//!   `released`, `not_grasped`: the same as `outcome` when the run did not
+//!   fail);
+//! - `events.log`: the end line starts with `FAILED: <status>`;
+//! - `dexitac sim`'s last stdout line starts with `FAILED: <status>` and its
+//!   exit code is 1; the figure's title says `FAILED: <status>`.
+//!
+//! **Nothing after the end.** A run ends at [`SimReport::sim_s`] (the
+//! scenario's duration, shortly after a drop or release, or earlier on a
+//! failure). A scheduled poke whose onset is not before the end was never
+//! applied: it is not in `disturbances` (nor in the figure, nor among the
+//! poke onsets of `events.log`) but in `pokes_not_reached`, whose length
+//! counts them. `timeseries.csv` has no row after the end.
 //!
 //! # `timeseries.csv`
 //!
@@ -52,7 +82,8 @@ use std::path::Path;
 use serde::Serialize;
 
 use crate::plant::{ObjectState, PokeTarget, WorldState, FINGER_COUNT};
-use crate::rig::SimReport;
+use crate::rig::{Pace, SimReport};
+use crate::status::{seconds, LoopError};
 use dexitac_gripper::grasp::{shifts_mm, Cause, CentreMm, Command};
 use dexitac_protocol::{ArmState, Chambers, HostMsg, PumpMode, CHAMBER_COUNT};
 use dexitac_rig::event::StopReason;
@@ -191,7 +222,7 @@ fn arm_state_words(s: ArmState) -> &'static str {
     }
 }
 
-fn loop_words(r: &Result<StopReason, String>) -> String {
+fn loop_words(r: &Result<StopReason, LoopError>) -> String {
     match r {
         Ok(StopReason::Requested) => "task loop stopped on request".to_string(),
         Ok(StopReason::FramesEnded) => "task loop stopped: the frames ended".to_string(),
@@ -202,16 +233,11 @@ fn loop_words(r: &Result<StopReason, String>) -> String {
 /// The event log, time-ordered, for people (see the module docs).
 pub fn event_log(r: &SimReport) -> String {
     let mut lines: Vec<(u64, String)> = Vec::new();
-    for d in &r.disturbances {
-        let late = if d.t_onset_s > r.sim_s {
-            "; after the end of the run: not applied"
-        } else {
-            ""
-        };
+    for d in r.pokes_reached() {
         lines.push((
             (d.t_onset_s * 1e3) as u64,
             format!(
-                "poke onset: {} (finger {}), {:.1} N peak over {:.2} s{late}",
+                "poke onset: {} (finger {}), {:.1} N peak over {:.2} s",
                 poke_target(d.poke.target),
                 d.poke.finger,
                 d.poke.peak_n,
@@ -249,15 +275,35 @@ pub fn event_log(r: &SimReport) -> String {
     } else {
         format!(" (faults: {})", faults.join(", "))
     };
+    let end_ms = r.end_ms().unwrap_or(0);
+    let late: Vec<String> = r
+        .pokes_not_reached()
+        .map(|d| format!("{} s", seconds(d.t_onset_s)))
+        .collect();
+    if !late.is_empty() {
+        lines.push((
+            end_ms,
+            format!(
+                "not reached, the run ended first: {} scheduled poke(s), onsets {}",
+                late.len(),
+                late.join(", ")
+            ),
+        ));
+    }
+    let status = r.status();
+    let outcome = r.outcome.name().replace('_', " ");
+    let loop_words = loop_words(&r.loop_result);
+    let mcu_words = arm_state_words(mcu.state);
     // Last among the events of its millisecond (the sort is stable).
     lines.push((
-        (r.sim_s * 1e3) as u64,
-        format!(
-            "end: outcome {}, {}, MCU {}{faults}",
-            r.outcome.name().replace('_', " "),
-            loop_words(&r.loop_result),
-            arm_state_words(mcu.state),
-        ),
+        end_ms,
+        if status.is_ok() {
+            format!("end: ok, outcome {outcome}, {loop_words}, MCU {mcu_words}{faults}")
+        } else {
+            format!(
+                "end: FAILED: {status}; object {outcome} at the end; {loop_words}; MCU {mcu_words}{faults}"
+            )
+        },
     ));
     lines.sort_by_key(|(t, _)| *t);
     let mut out = format!(
@@ -405,14 +451,18 @@ fn cell(v: Option<f64>, decimals: usize) -> String {
 }
 
 /// Writes `timeseries.csv` (columns in the module docs) with the `csv`
-/// crate.
+/// crate: one row per trace sample up to the end of the run.
 pub fn write_timeseries(r: &SimReport, w: impl io::Write) -> io::Result<()> {
     let mut csv = csv::Writer::from_writer(w);
     csv.write_record(timeseries_header())?;
     let shifts = frame_shifts(r);
-    let rows: Vec<Vec<Option<usize>>> = shifts.iter().map(|s| latest_at(&r.trace, s)).collect();
+    let trace = match r.end_ms() {
+        Some(end) => &r.trace[..r.trace.partition_point(|w| w.t_ms <= end)],
+        None => &r.trace[..],
+    };
+    let rows: Vec<Vec<Option<usize>>> = shifts.iter().map(|s| latest_at(trace, s)).collect();
     let mut record: Vec<String> = Vec::new();
-    for (i, w) in r.trace.iter().enumerate() {
+    for (i, w) in trace.iter().enumerate() {
         record.clear();
         record.push(cell(Some(secs(w.t_ms)), 3));
         let frame =
@@ -473,18 +523,29 @@ fn percentile_ms(sorted_ms: &[f64], p: f64) -> Option<f64> {
 pub struct Summary {
     /// The scenario's name.
     pub scenario: String,
+    /// `ok`, or how the run failed and when (simulated time):
+    /// `tripped: HostSilence at 11.3 s`, `MCU reset at 4.2 s`,
+    /// `error: <message>` ([module docs](self#failed-runs)).
+    pub status: String,
     /// The manipulation task, if the scenario has one and it started (its
     /// keys sit at the top level).
     #[serde(flatten)]
     pub task: Option<TaskSummary>,
     /// Whether the loop was closed on the tactile frames.
     pub tactile_feedback: bool,
-    /// `held`, `dropped`, `released` or `not_grasped`.
+    /// `failed` when `status` is not `ok`; else `held`, `dropped`,
+    /// `released` or `not_grasped`, as `object_at_end`.
     pub outcome: &'static str,
+    /// What became of the object, failed run or not: `held` (still in the
+    /// grasp at the end), `dropped`, `released` or `not_grasped`.
+    pub object_at_end: &'static str,
     /// Closing began -> seal decision, s.
     pub time_to_stable_s: Option<f64>,
-    /// One entry per poke.
+    /// One entry per poke whose onset came before the end of the run.
     pub disturbances: Vec<DisturbanceSummary>,
+    /// The scheduled pokes the run ended before (never applied); their
+    /// number is the length.
+    pub pokes_not_reached: Vec<PokeNotReached>,
     /// When the object fell, s.
     pub dropped_at_s: Option<f64>,
     /// Frame arrival -> command bytes written, for commands a frame decided.
@@ -500,7 +561,8 @@ pub struct Summary {
     pub mcu_state_at_end: &'static str,
     /// Simulated run time, s.
     pub sim_s: Option<f64>,
-    /// Wall-clock run time, s.
+    /// Wall-clock run time, s; `null` on the virtual clock (`--speed max`),
+    /// where everything else repeats exactly from run to run.
     pub wall_s: Option<f64>,
 }
 
@@ -523,6 +585,17 @@ pub struct DisturbanceSummary {
     pub t_valves_open_s: Option<f64>,
     /// Onset to valves open.
     pub response_s: Option<f64>,
+}
+
+/// A scheduled poke the run did not reach, in `summary.json`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PokeNotReached {
+    /// `object`, `actuator` or `fingertip_back`.
+    pub target: &'static str,
+    /// Which finger (actuator and fingertip pokes).
+    pub finger: usize,
+    /// Its scheduled onset, s (not before the end of the run).
+    pub t_onset_s: Option<f64>,
 }
 
 /// Latency statistics in `summary.json`, ms.
@@ -576,8 +649,7 @@ impl Summary {
         };
         let s3 = |v: Option<f64>| v.and_then(|v| rounded(v, 3));
         let disturbances = r
-            .disturbances
-            .iter()
+            .pokes_reached()
             .map(|d| DisturbanceSummary {
                 target: target(d.poke.target),
                 finger: d.poke.finger,
@@ -593,6 +665,14 @@ impl Summary {
             .frame_to_command
             .iter()
             .map(|d| d.as_secs_f64() * 1e3)
+            .collect();
+        let pokes_not_reached = r
+            .pokes_not_reached()
+            .map(|d| PokeNotReached {
+                target: target(d.poke.target),
+                finger: d.poke.finger,
+                t_onset_s: rounded(d.t_onset_s, 3),
+            })
             .collect();
         lat.sort_by(f64::total_cmp);
         let loop_result = match &r.loop_result {
@@ -620,11 +700,14 @@ impl Summary {
         });
         Summary {
             scenario: r.scenario.clone(),
+            status: r.status().to_string(),
             task,
             tactile_feedback: r.tactile_feedback,
-            outcome: r.outcome.name(),
+            outcome: r.outcome_word(),
+            object_at_end: r.outcome.name(),
             time_to_stable_s: s3(r.time_to_stable_s),
             disturbances,
+            pokes_not_reached,
             dropped_at_s: s3(r.dropped_at_ms.map(secs)),
             frame_to_command_ms: LatencySummary {
                 count: lat.len(),
@@ -636,7 +719,12 @@ impl Summary {
             loop_result,
             mcu_state_at_end,
             sim_s: rounded(r.sim_s, 3),
-            wall_s: rounded(r.wall_s, 3),
+            // Virtual time: the wall time would make two runs' files differ.
+            wall_s: if r.pace == Pace::Max {
+                None
+            } else {
+                rounded(r.wall_s, 3)
+            },
         }
     }
 }
@@ -652,6 +740,7 @@ mod tests {
     use crate::mcu::McuSnapshot;
     use crate::plant::{ContactState, Plant, PlantParams, Poke, PokeShape, Trajectory};
     use crate::rig::{DisturbanceTiming, ObservationRecord, Outcome};
+    use crate::status::LoopError;
     use crate::task_report::TaskReport;
     use dexitac_gripper::grasp::Decision;
     use dexitac_gripper::manipulation::TaskKind;
@@ -731,6 +820,7 @@ mod tests {
         chambers[0] = ValveState::Inflate;
         chambers[4] = ValveState::Deflate;
         SimReport {
+            pace: crate::rig::Pace::Times(1.0),
             scenario: "unit \"test\"".to_string(),
             tactile_feedback: true,
             outcome: Outcome::Released,
@@ -837,16 +927,22 @@ mod tests {
                 "host_max_loop_gap_ms",
                 "loop_result",
                 "mcu_state_at_end",
+                "object_at_end",
                 "outcome",
+                "pokes_not_reached",
                 "scenario",
                 "sim_s",
+                "status",
                 "tactile_feedback",
                 "time_to_stable_s",
                 "wall_s",
             ]
         );
         assert_eq!(v["scenario"], "unit \"test\"");
+        assert_eq!(v["status"], "ok");
         assert_eq!(v["outcome"], "released");
+        assert_eq!(v["object_at_end"], "released");
+        assert_eq!(v["pokes_not_reached"], serde_json::json!([]));
         assert_eq!(v["time_to_stable_s"], 0.3);
         assert_eq!(v["frames"], 22);
         assert_eq!(v["host_max_loop_gap_ms"], 7.0);
@@ -1034,15 +1130,140 @@ mod tests {
             "    0.650 s  poke onset: back of the fingertip (finger 1), 4.5 N peak over 0.20 s",
             "    0.703 s  decision: reopen inflation (disturbance on sensor 0: frame shift 0.50 mm, anchored 0.50 mm; frame captured at 0.700 s)",
             "    0.903 s  command sent: vent all chambers, pumps off (release)",
-            "    1.000 s  end: outcome released, task loop stopped on request, MCU tripped (faults: host silent past the deadline)",
+            "    1.000 s  not reached, the run ended first: 1 scheduled poke(s), onsets 1.5 s",
         ] {
             assert!(log.lines().any(|l| l == line), "{line:?} not in:\n{log}");
         }
-        // Time-ordered, the end included; a poke after it says so.
+        // Time-ordered, the end last; the poke after it is not an onset.
         assert!(log.trim_end().ends_with(
-            "1.500 s  poke onset: back of the fingertip (finger 1), 4.5 N peak over 0.20 s; \
-             after the end of the run: not applied"
+            "    1.000 s  end: ok, outcome released, task loop stopped on request, \
+             MCU tripped (faults: host silent past the deadline)"
         ));
+        assert_eq!(log.matches("poke onset").count(), 1, "{log}");
+    }
+
+    /// The issue's run: tripped on host silence at 11.23 s (the MCU's time),
+    /// ended at 11.3 s, the object still
+    /// in the grasp, pokes scheduled at 5 (reached), 12, 18 and 24 s, a
+    /// trace row after the end.
+    fn tripped_report() -> SimReport {
+        let mut r = report();
+        let poke = r.disturbances[0];
+        r.disturbances = [5.0, 12.0, 18.0, 24.0]
+            .into_iter()
+            .map(|at_s| DisturbanceTiming {
+                poke: Poke { at_s, ..poke.poke },
+                t_onset_s: at_s,
+                ..poke
+            })
+            .collect();
+        r.outcome = Outcome::Held;
+        r.loop_result = Err(LoopError::McuFault(dexitac_protocol::FaultEvent {
+            time_ms: 11_230,
+            fault: Fault::HostSilence,
+            positive_tank_pa: 40_000,
+            negative_tank_pa: -45_000,
+        }));
+        r.trace = (0..=114).map(|i| world(100 * i)).collect();
+        r.sim_s = 11.3;
+        r
+    }
+
+    /// The time of an events.log line, s.
+    fn line_time(line: &str) -> f64 {
+        line.split(" s  ").next().unwrap().trim().parse().unwrap()
+    }
+
+    #[test]
+    fn a_tripped_run_says_so_in_its_summary() {
+        let r = tripped_report();
+        assert_eq!(r.status().to_string(), "tripped: HostSilence at 11.23 s");
+        let v: serde_json::Value = serde_json::from_str(&summary_json(&r).unwrap()).unwrap();
+        assert_eq!(v["status"], "tripped: HostSilence at 11.23 s");
+        // Never `held` for a failed run; the object's fate is kept apart.
+        assert_eq!(v["outcome"], "failed");
+        assert_eq!(v["object_at_end"], "held");
+        assert!(v["loop_result"]
+            .as_str()
+            .unwrap()
+            .starts_with("error: the MCU tripped: host silent past the deadline at 11230 ms"));
+        // Only the poke before the end happened; the others are counted apart.
+        let onsets = |key: &str| -> Vec<f64> {
+            v[key]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|d| d["t_onset_s"].as_f64().unwrap())
+                .collect()
+        };
+        assert_eq!(onsets("disturbances"), [5.0]);
+        assert_eq!(onsets("pokes_not_reached"), [12.0, 18.0, 24.0]);
+        assert_eq!(v["pokes_not_reached"][0]["target"], "fingertip_back");
+    }
+
+    #[test]
+    fn a_tripped_run_lists_nothing_after_its_end() {
+        let r = tripped_report();
+        let log = event_log(&r);
+        let lines: Vec<&str> = log.lines().filter(|l| !l.starts_with('#')).collect();
+        for line in &lines {
+            assert!(
+                line_time(line) <= 11.3,
+                "after the end: {line:?} in:\n{log}"
+            );
+        }
+        let onsets: Vec<&&str> = lines.iter().filter(|l| l.contains("poke onset")).collect();
+        assert_eq!(onsets.len(), 1, "{log}");
+        assert!(onsets[0].starts_with("    5.000 s  "), "{log}");
+        assert!(
+            lines.contains(
+                &"   11.300 s  not reached, the run ended first: 3 scheduled poke(s), \
+                  onsets 12.0 s, 18.0 s, 24.0 s"
+            ),
+            "{log}"
+        );
+        let end = lines.last().unwrap();
+        assert!(
+            end.starts_with(
+                "   11.300 s  end: FAILED: tripped: HostSilence at 11.23 s; object held at the end; \
+                 task loop failed: the MCU tripped: host silent past the deadline at 11230 ms"
+            ),
+            "{end}"
+        );
+        assert!(!log.contains("outcome held"), "{log}");
+        // The time series ends with the run.
+        let text = csv_of(&r);
+        let last = text.lines().last().unwrap();
+        assert!(last.starts_with("11.300,"), "{last}");
+    }
+
+    #[test]
+    fn failures_without_a_fault_event_are_stated_too() {
+        let mut r = tripped_report();
+        // A refused command, the MCU tripped at the end: the trip, and why.
+        r.loop_result = Err(LoopError::Other("link: refused: tripped".into()));
+        assert_eq!(
+            r.status().to_string(),
+            "tripped: HostSilence at 11.3 s (link: refused: tripped)"
+        );
+        r.mcu_at_end.state = ArmState::Disarmed;
+        r.mcu_at_end.faults = FaultFlags::default();
+        assert_eq!(r.status().to_string(), "error: link: refused: tripped");
+        r.loop_result = Err(LoopError::McuReset {
+            cause: None,
+            t_ms: 11_250,
+        });
+        assert_eq!(r.status().to_string(), "MCU reset, noticed at 11.25 s");
+        for r in [&r, &tripped_report()] {
+            let v: serde_json::Value = serde_json::from_str(&summary_json(r).unwrap()).unwrap();
+            assert_eq!(v["outcome"], "failed");
+            assert_eq!(v["status"], r.status().to_string());
+            assert!(event_log(r).contains(&format!("end: FAILED: {}; ", r.status())));
+        }
+        // A run that ended normally is ok, whatever the MCU says.
+        r.loop_result = Ok(StopReason::FramesEnded);
+        assert_eq!(r.status().to_string(), "ok");
+        assert_eq!(r.outcome_word(), "held");
     }
 
     #[test]

@@ -293,7 +293,8 @@ pub struct SimReport {
     pub scenario: String,
     /// Whether the loop was closed on the tactile frames.
     pub tactile_feedback: bool,
-    /// How it ended.
+    /// How it ended for the object. The outputs say `failed` instead for a
+    /// run whose task loop failed ([`SimReport::outcome_word`]).
     pub outcome: Outcome,
     /// Closing began -> seal decision, s.
     pub time_to_stable_s: Option<f64>,
@@ -322,8 +323,8 @@ pub struct SimReport {
     pub snapshots: Vec<Snapshot>,
     /// The calibrations (for heatmaps).
     pub calibrations: Vec<Calibration>,
-    /// How the task loop ended.
-    pub loop_result: Result<StopReason, String>,
+    /// How the task loop ended; [`SimReport::status`] states it in words.
+    pub loop_result: Result<StopReason, crate::status::LoopError>,
     /// The MCU's state at the end.
     pub mcu_at_end: McuSnapshot,
     /// The host link's traffic counters.
@@ -338,6 +339,8 @@ pub struct SimReport {
     pub sim_s: f64,
     /// Wall-clock run time, s.
     pub wall_s: f64,
+    /// How simulated time ran.
+    pub pace: Pace,
 }
 
 /// A fingertip camera rendering the plant's contact.
@@ -656,7 +659,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
         &plant,
         collected,
         calibrations,
-        loop_result.map_err(|e| e.to_string()),
+        loop_result,
         mcu_at_end,
     );
     Ok(SimReport {
@@ -878,9 +881,10 @@ fn build_report(
     plant: &Plant,
     c: Collected,
     calibrations: Vec<Calibration>,
-    loop_result: Result<StopReason, String>,
+    loop_result: Result<StopReason, impl Into<crate::status::LoopError>>,
     mcu_at_end: McuSnapshot,
 ) -> SimReport {
+    let loop_result = loop_result.map_err(Into::into);
     let released_ms = c
         .commands
         .iter()
@@ -913,6 +917,7 @@ fn build_report(
         .as_ref()
         .and_then(|t| task_report(t, c.task_events, plant.trace()));
     SimReport {
+        pace: options.speed,
         scenario: scenario.name.clone(),
         tactile_feedback: options.tactile_feedback,
         outcome,

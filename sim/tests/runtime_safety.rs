@@ -5,10 +5,11 @@
 //! stated time, with the gripper sealed and the MCU disarmed or tripped.
 //! Virtual time makes every bound exact: the same run gives the same times.
 
-use dexitac_protocol::{ArmState, ValveState, CHAMBER_COUNT};
+use dexitac_protocol::{ArmState, ResetCause, ValveState, CHAMBER_COUNT};
 use dexitac_rig::task_loop::{MCU_SILENCE_MS, SENSOR_TIMEOUT_MS};
 use dexitac_sim::rig::{run_scenario, Injection, Outcome, Pace, SimOptions, SimReport};
 use dexitac_sim::scenario::Scenario;
+use dexitac_sim::status::{seconds, LoopError};
 
 /// When the faults strike: grasp-hold has sealed its grasp by then (closing
 /// starts after the tanks charge, the stable span is 3 s) and is lifting.
@@ -29,10 +30,10 @@ fn run(injections: Vec<Injection>) -> SimReport {
 }
 
 /// The run's error text.
-fn error(r: &SimReport) -> &str {
+fn error(r: &SimReport) -> String {
     match &r.loop_result {
         Ok(reason) => panic!("the run ended normally ({reason:?})"),
-        Err(e) => e,
+        Err(e) => e.to_string(),
     }
 }
 
@@ -72,12 +73,21 @@ fn the_undisturbed_run_holds_and_ends_normally() {
 #[test]
 fn a_board_reset_mid_grasp_ends_the_run_within_the_silence_bound() {
     let r = run(vec![Injection::McuResetAt { at_ms: AT_MS }]);
-    let e = error(&r);
-    assert!(e.contains("the MCU reset") && e.contains("Software"), "{e}");
+    let Err(LoopError::McuReset {
+        cause,
+        t_ms: noticed,
+    }) = r.loop_result
+    else {
+        panic!("{:?}", r.loop_result);
+    };
     // The firmware restarts with telemetry off: the loop notices the
     // silence after MCU_SILENCE_MS (the last telemetry came at most one
     // period before the reset) and its hello gets the reset cause.
-    let noticed = number_after(e, "noticed at ");
+    assert_eq!(cause, Some(ResetCause::Software));
+    assert_eq!(
+        r.status().to_string(),
+        format!("MCU reset, noticed at {} s", seconds(noticed as f64 / 1e3))
+    );
     assert!(
         noticed > AT_MS + MCU_SILENCE_MS - TELEMETRY_MS
             && noticed <= AT_MS + MCU_SILENCE_MS + 2 * TELEMETRY_MS,
@@ -102,7 +112,7 @@ fn an_over_limit_reading_trips_the_board_and_the_run_reports_the_fault() {
         e.contains("tripped: positive tank over its pressure limit"),
         "{e}"
     );
-    let tripped = number_after(e, "at ");
+    let tripped = number_after(&e, "at ");
     // MCU time, which started with the run: the trip follows within the
     // firmware's filter, well inside a telemetry period.
     assert!(
@@ -136,8 +146,8 @@ fn a_camera_that_stops_while_holding_ends_the_run_sealed() {
     }]);
     let e = error(&r);
     assert!(e.contains("sensor 1 delivered no frame"), "{e}");
-    let last = number_after(e, "last at ");
-    let silent = number_after(e, "for ");
+    let last = number_after(&e, "last at ");
+    let silent = number_after(&e, "for ");
     // Its last frame was the one before AT_MS; the watchdog fires at the
     // first pass after SENSOR_TIMEOUT_MS without one.
     assert!(
@@ -167,7 +177,7 @@ fn a_host_stall_beyond_the_firmware_deadline_trips_it_at_its_real_value() {
     }]);
     let e = error(&r);
     assert!(e.contains("tripped: host silent past the deadline"), "{e}");
-    let tripped = number_after(e, "at ");
+    let tripped = number_after(&e, "at ");
     // The host's last frame before the stall came within one heartbeat
     // period (100 ms) of it; the trip follows 500 ms after that frame.
     assert!(

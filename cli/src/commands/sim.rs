@@ -1,5 +1,13 @@
 //! `dexitac sim`: the whole system on the simulated rig (see
 //! `dexitac_sim::rig`), results to a directory (see `dexitac_sim::output`).
+//!
+//! The last line on stdout is the run in one line: `scenario NAME: ok,
+//! outcome held, ...`, or for a run whose task loop failed (the MCU tripped
+//! or reset, the link or a sensor failed) `FAILED: <status>; scenario NAME
+//! ended at 11.4 s, object held at the end, 0 of 3 poke(s) before the end,
+//! wrote DIR`, and
+//! the exit code is 1 ([`crate::exit`]). `<status>` is `summary.json`'s
+//! (`tripped: HostSilence at 11.3 s`; `dexitac_sim::status`).
 
 use anyhow::anyhow;
 use std::path::PathBuf;
@@ -16,7 +24,7 @@ use crate::shared::out_dir::{self, Owned};
 use crate::shared::record::{finish_recorder, start_recorder, RecordFlags};
 use crate::shared::stop_on_ctrl_c;
 use dexitac_sim::plant::FINGER_COUNT;
-use dexitac_sim::rig::{self, Pace, SimOptions};
+use dexitac_sim::rig::{self, Pace, SimOptions, SimReport};
 use dexitac_sim::scenario::{Scenario, DEFAULT_SCENARIO, PRESETS};
 use dexitac_tactile::params::Params;
 
@@ -80,7 +88,8 @@ pub const OWNED: [Owned; 7] = [
 
 impl SimArgs {
     /// Runs `dexitac sim`: [`Outcome::Negative`] when the task loop failed
-    /// (a trip, the link); the results are written either way.
+    /// (a trip, an MCU reset, the link, a sensor); the results are written
+    /// either way, and the last stdout line starts with `FAILED:`.
     pub fn run(&self) -> anyhow::Result<Outcome> {
         run(self)
     }
@@ -148,16 +157,6 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
                 .map_err(std::io::Error::other)
         })
         .with_context(|| format!("writing {}", args.out.display()))?;
-    println!(
-        "scenario {}: outcome {}, time to stable {}, {} poke(s), wrote {}",
-        report.scenario,
-        report.outcome.name(),
-        report
-            .time_to_stable_s
-            .map_or("-".to_string(), |t| format!("{t:.2} s")),
-        report.disturbances.len(),
-        args.out.display()
-    );
     if let Some(t) = &report.task {
         let fmt =
             |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.1} {unit}"));
@@ -180,6 +179,13 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
         );
     }
     for d in &report.disturbances {
+        if !report.poke_reached(d) {
+            println!(
+                "  poke {:?} at {:.2} s: not reached, the run ended at {:.2} s",
+                d.poke.target, d.t_onset_s, report.sim_s
+            );
+            continue;
+        }
         println!(
             "  poke {:?} at {:.2} s: detected {}, valves open {}",
             d.poke.target,
@@ -193,12 +199,17 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
         );
     }
     view.wait();
+    info!(
+        "dexitac sim: {:.1} s simulated in {:.2} s of wall-clock time (speed {})",
+        report.sim_s, report.wall_s, args.speed
+    );
+    println!("{}", final_line(&report, &args.out));
     match &report.loop_result {
         Ok(_) => Ok(Outcome::Success),
         Err(e) => {
             error!("dexitac sim: the task loop failed: {e}");
             let stalled_ms = report.max_loop_gap.as_secs_f64() * 1e3;
-            if stalled_ms >= f64::from(args.host_silence_ms) {
+            if args.speed != Pace::Max && stalled_ms >= f64::from(args.host_silence_ms) {
                 error!(
                     "dexitac sim: the host's control loop stalled for {stalled_ms:.0} ms, longer than \
                      the board's {} ms host-silence deadline, so the firmware tripped as it would on \
@@ -209,5 +220,36 @@ fn run(args: &SimArgs) -> anyhow::Result<Outcome> {
             }
             Ok(Outcome::Negative)
         }
+    }
+}
+
+/// The last stdout line (module docs): the status first when the run failed.
+fn final_line(report: &SimReport, out: &std::path::Path) -> String {
+    let scheduled = report.disturbances.len();
+    let reached = report.pokes_reached().count();
+    let pokes = if reached == scheduled {
+        format!("{scheduled} poke(s)")
+    } else {
+        format!("{reached} of {scheduled} poke(s) before the end")
+    };
+    let status = report.status();
+    if status.is_ok() {
+        format!(
+            "scenario {}: ok, outcome {}, time to stable {}, {pokes}, wrote {}",
+            report.scenario,
+            report.outcome.name(),
+            report
+                .time_to_stable_s
+                .map_or("-".to_string(), |t| format!("{t:.2} s")),
+            out.display()
+        )
+    } else {
+        format!(
+            "FAILED: {status}; scenario {} ended at {} s, object {} at the end, {pokes}, wrote {}",
+            report.scenario,
+            dexitac_sim::status::seconds(report.sim_s),
+            report.outcome.name().replace('_', " "),
+            out.display()
+        )
     }
 }

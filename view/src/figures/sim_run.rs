@@ -26,7 +26,12 @@
 //! valves opening in response (the paper's green response area; a thin
 //! band at the onset when the valves never opened), and a red vertical line
 //! marks where the object fell. The title names the
-//! scenario, the tactile feedback and the outcome.
+//! scenario, the tactile feedback and the outcome; for a run that failed
+//! (the MCU tripped or reset, the link or a sensor failed:
+//! [`dexitac_sim::status`]) it says `FAILED: <status>` in red instead, with
+//! what became of the object (`FAILED: tripped: HostSilence at 11.3 s;
+//! object held at the end`). Scheduled pokes the run ended before are not
+//! drawn: they never happened.
 //!
 //! **Heatmaps** `heatmap_NN_<t>s_<event>.png` ([`HeatmapFigure`], at most
 //! [`MAX_HEATMAPS`]): both sensors' marker density relative to rest at a
@@ -84,6 +89,10 @@ fn secs(t_ms: u64) -> f64 {
 }
 
 const POKE: RGBColor = RGBColor(210, 30, 30);
+/// The title of a failed run.
+const FAILED: RGBColor = RGBColor(200, 0, 0);
+/// Longest status in the title, characters (a long error message is cut).
+const TITLE_STATUS_CHARS: usize = 90;
 const BAND: RGBColor = RGBColor(205, 240, 205);
 const DROP: RGBColor = RGBColor(210, 30, 30);
 const POSITIVE_TANK: RGBColor = RGBColor(150, 40, 150);
@@ -127,7 +136,7 @@ enum Panel {
 impl RunFigure<'_> {
     fn panels(&self) -> Vec<Panel> {
         // A run without pokes (the manipulation tasks) has no force panel.
-        let poked = !self.report.disturbances.is_empty()
+        let poked = self.report.pokes_reached().next().is_some()
             || self.report.trace.iter().any(|s| s.external_n > 0.0);
         let mut p = vec![Panel::Shift, Panel::Valves, Panel::Pressure];
         if poked {
@@ -168,11 +177,32 @@ impl RunFigure<'_> {
             .as_ref()
             .map(|t| format!(", task {} with {}", t.kind.name(), t.gripper))
             .unwrap_or_default();
+        let status = r.status();
+        if status.is_ok() {
+            return format!(
+                "Simulated run: {} (tactile feedback {feedback}{task}), outcome {}",
+                r.scenario,
+                r.outcome.name()
+            );
+        }
+        let mut status = status.to_string();
+        if let Some((cut, _)) = status.char_indices().nth(TITLE_STATUS_CHARS) {
+            status.truncate(cut);
+            status.push_str("...");
+        }
         format!(
-            "Simulated run: {} (tactile feedback {feedback}{task}), outcome {}",
+            "Simulated run: {} (tactile feedback {feedback}{task}), FAILED: {status}; object {} at the end",
             r.scenario,
-            r.outcome.name()
+            r.outcome.name().replace('_', " ")
         )
+    }
+
+    fn title_style(&self) -> TextStyle<'static> {
+        if self.report.status().is_ok() {
+            font(24)
+        } else {
+            font(24).color(&FAILED)
+        }
     }
 }
 
@@ -188,7 +218,7 @@ impl Figure for RunFigure<'_> {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), FigureError> {
         let r = self.report;
         let (_, h) = self.size_px();
-        let body = root.titled(&self.title(), font(24))?;
+        let body = root.titled(&self.title(), self.title_style())?;
         let panels = self.panels();
         let mut breaks = Vec::new();
         let mut y = 0;
@@ -248,8 +278,7 @@ impl TimeMarks {
     fn of(r: &SimReport) -> Self {
         TimeMarks {
             responses: r
-                .disturbances
-                .iter()
+                .pokes_reached()
                 .map(|d| (d.t_onset_s, d.t_valves_open_s))
                 .collect(),
             drop_s: r.dropped_at_ms.map(secs),
@@ -416,7 +445,7 @@ fn force_panel<DB: DrawingBackend>(
     draw_runs(&mut chart, force, POKE.stroke_width(2), false)?;
     // Each poke's target above its peak, as the paper's panels (b)-(d).
     let label = font(14).pos(Pos::new(HPos::Center, VPos::Bottom));
-    chart.draw_series(r.disturbances.iter().map(|d| {
+    chart.draw_series(r.pokes_reached().map(|d| {
         let target = match d.poke.target {
             PokeTarget::Object => "on the object",
             PokeTarget::Actuator => "on a soft actuator",
@@ -833,9 +862,13 @@ mod tests {
     use crate::figures::test_support::check_figure;
     use dexitac_gripper::grasp::{Cause, CentreMm, Command, Decision};
     use dexitac_protocol::{ArmState, FaultFlags, CHAMBER_COUNT};
+    use dexitac_protocol::{Fault, FaultEvent};
+    use dexitac_rig::event::StopReason;
     use dexitac_sim::mcu::McuSnapshot;
     use dexitac_sim::plant::{Plant, PlantParams, Trajectory, WorldState};
-    use dexitac_sim::rig::{ObservationRecord, Outcome};
+    use dexitac_sim::plant::{Poke, PokeShape};
+    use dexitac_sim::rig::{DisturbanceTiming, ObservationRecord, Outcome};
+    use dexitac_sim::status::LoopError;
     use std::sync::Arc;
     use std::time::Duration;
 
@@ -855,6 +888,7 @@ mod tests {
 
     fn report(trace: Vec<WorldState>, observations: Vec<ObservationRecord>) -> SimReport {
         SimReport {
+            pace: dexitac_sim::rig::Pace::Times(1.0),
             scenario: "probe".into(),
             tactile_feedback: true,
             outcome: Outcome::Held,
@@ -870,7 +904,7 @@ mod tests {
             dropped_at_ms: None,
             snapshots: Vec::new(),
             calibrations: Vec::new(),
-            loop_result: Err("test".into()),
+            loop_result: Ok(StopReason::Requested),
             mcu_at_end: McuSnapshot {
                 time_ms: 0,
                 chambers: [ValveState::Hold; CHAMBER_COUNT],
@@ -988,6 +1022,62 @@ mod tests {
             .last()
             .and_then(|(_, v)| *v)
             .is_some_and(|v| (v - 0.69).abs() < 1e-9));
+    }
+
+    #[test]
+    fn a_failed_run_says_so_in_red_in_the_title_and_draws_no_poke_after_its_end() {
+        let trace: Vec<WorldState> = (0..=113).map(|k| world(k * 100)).collect();
+        let mut r = report(trace, Vec::new());
+        let ok_title = RunFigure { report: &r }.title();
+        assert!(ok_title.ends_with("outcome held"), "{ok_title}");
+        assert!(!ok_title.contains("FAILED"), "{ok_title}");
+        r.sim_s = 11.3;
+        r.loop_result = Err(LoopError::McuFault(FaultEvent {
+            time_ms: 11_300,
+            fault: Fault::HostSilence,
+            positive_tank_pa: 0,
+            negative_tank_pa: 0,
+        }));
+        let poke = |target, at_s| DisturbanceTiming {
+            poke: Poke {
+                target,
+                finger: 0,
+                at_s,
+                duration_s: 1.0,
+                peak_n: 3.0,
+                shape: PokeShape::HalfSine,
+            },
+            t_onset_s: at_s,
+            t_detected_s: None,
+            t_reopen_sent_s: None,
+            t_valves_open_s: None,
+        };
+        r.disturbances = vec![
+            poke(PokeTarget::Object, 5.0),
+            poke(PokeTarget::Actuator, 12.0),
+            poke(PokeTarget::FingertipBack, 18.0),
+        ];
+        let figure = RunFigure { report: &r };
+        let img = check_figure(
+            &figure,
+            &[
+                "FAILED: tripped: HostSilence at 11.3 s; object held at the end",
+                "on the object",
+            ],
+        );
+        let svg_dir = tempfile::tempdir().unwrap();
+        write_png_and_svg(&figure, svg_dir.path(), "fig").unwrap();
+        let svg = std::fs::read_to_string(svg_dir.path().join("fig.svg")).unwrap();
+        for late in ["on a soft actuator", "on a fingertip's back"] {
+            assert!(!svg.contains(late), "a poke after the end is drawn: {late}");
+        }
+        assert!(!svg.contains("outcome held"));
+        // The title is red.
+        let red = (0..img.width())
+            .flat_map(|x| (0..TITLE_PX).map(move |y| (x, y)))
+            .filter(|&(x, y)| img.get_pixel(x, y).0 == [FAILED.0, FAILED.1, FAILED.2])
+            .count();
+        assert!(red > 50, "{red} red px in the title");
     }
 
     #[test]
