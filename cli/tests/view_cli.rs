@@ -6,6 +6,7 @@ use std::ffi::OsStr;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use dexitac_view::draw::{INFLATE_COLOUR, NO_FRAME, POSITIVE_TANK_COLOUR};
@@ -288,32 +289,46 @@ fn needs(program: &str, what_for: &str) -> Result<(), String> {
     }
 }
 
+/// Starts Xvfb on a free display. The window tests run in parallel in one
+/// process: each takes its own display number (a process-wide counter), as
+/// two tests that both saw the same number free would share one server,
+/// and the first to finish would kill the other's display. A number another
+/// process took meanwhile makes Xvfb exit at once: the next one is tried.
 fn start_xvfb() -> Result<Xvfb, String> {
+    static NEXT: AtomicU32 = AtomicU32::new(0);
     needs("Xvfb", "apt-get install xvfb to run this test")?;
-    let n = (100..400)
-        .map(|k| k + std::process::id() % 300)
-        .find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())
-        .ok_or("no free X display number in :100..:699")?;
-    let display = format!(":{n}");
-    let child = Command::new("Xvfb")
-        .args([&display, "-screen", "0", "1400x900x24", "-nolisten", "tcp"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .map_err(|e| format!("Xvfb did not start: {e}"))?;
-    let mut xvfb = Xvfb { child, display };
-    let socket = format!("/tmp/.X11-unix/X{n}");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while !Path::new(&socket).exists() {
-        if let Ok(Some(status)) = xvfb.child.try_wait() {
-            return Err(format!("Xvfb exited at start-up ({status})"));
+    let base = 100 + std::process::id() % 300;
+    let mut last_failure = String::from("no free X display number in :100..:699");
+    for _ in 0..20 {
+        let n = base + NEXT.fetch_add(1, Ordering::Relaxed) % 300;
+        let socket = format!("/tmp/.X11-unix/X{n}");
+        if Path::new(&socket).exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+            continue;
         }
-        if Instant::now() > deadline {
-            return Err(format!("Xvfb did not open {socket} within 10 s"));
+        let display = format!(":{n}");
+        let child = Command::new("Xvfb")
+            .args([&display, "-screen", "0", "1400x900x24", "-nolisten", "tcp"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("Xvfb did not start: {e}"))?;
+        let mut xvfb = Xvfb { child, display };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            if let Ok(Some(status)) = xvfb.child.try_wait() {
+                last_failure = format!("Xvfb exited at start-up on :{n} ({status})");
+                break;
+            }
+            if Path::new(&socket).exists() {
+                return Ok(xvfb);
+            }
+            if Instant::now() > deadline {
+                return Err(format!("Xvfb did not open {socket} within 10 s"));
+            }
+            std::thread::sleep(Duration::from_millis(50));
         }
-        std::thread::sleep(Duration::from_millis(50));
     }
-    Ok(xvfb)
+    Err(last_failure)
 }
 
 #[test]
