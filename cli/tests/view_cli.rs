@@ -2,8 +2,11 @@
 //! simulated run and of `dexitac view --render`, clear messages without a
 //! display, and (when `Xvfb` is installed) the real window.
 
+use std::ffi::OsStr;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use dexitac_view::draw::{INFLATE_COLOUR, NO_FRAME, POSITIVE_TANK_COLOUR};
@@ -220,61 +223,119 @@ impl Drop for Xvfb {
     }
 }
 
-/// Skips a test whose tool is missing, or fails it when CI asked for the
-/// window tests to run (`DEXITAC_REQUIRE_WINDOW_TESTS=1`, set by `.ci/run`,
-/// which installs Xvfb and xdotool).
-fn skip(why: &str) {
-    assert!(
-        std::env::var_os("DEXITAC_REQUIRE_WINDOW_TESTS").is_none(),
-        "DEXITAC_REQUIRE_WINDOW_TESTS is set but {why}"
-    );
-    eprintln!("skipped: {why}");
+/// The variable that makes the window tests required (`.ci/run` sets it
+/// and installs Xvfb and xdotool).
+const REQUIRE_WINDOW_TESTS: &str = "DEXITAC_REQUIRE_WINDOW_TESTS";
+
+/// What a window test that cannot run does: `Ok(note)` to skip, printing
+/// the note, or `Err(message)` to fail, when `required` (the value of
+/// [`REQUIRE_WINDOW_TESTS`]) is set to anything but empty or `0`.
+fn skip_verdict(required: Option<&OsStr>, why: &str) -> Result<String, String> {
+    match required {
+        Some(v) if !v.is_empty() && v != "0" => Err(format!(
+            "{REQUIRE_WINDOW_TESTS}={} requires the window tests to run, but {why}",
+            v.to_string_lossy()
+        )),
+        _ => Ok(format!(
+            "skipped: {why} (set {REQUIRE_WINDOW_TESTS}=1 to make this a failure)\n"
+        )),
+    }
 }
 
-fn start_xvfb() -> Option<Xvfb> {
-    if !on_path("Xvfb") {
-        skip("Xvfb is not installed (apt-get install xvfb to run this test)");
-        return None;
-    }
-    // Every early return skips loudly (and fails under
-    // DEXITAC_REQUIRE_WINDOW_TESTS): a window test must not pass having run
-    // nothing.
-    let Some(n) = (100..400)
-        .map(|k| k + std::process::id() % 300)
-        .find(|n| !Path::new(&format!("/tmp/.X11-unix/X{n}")).exists())
-    else {
-        skip("no free X display number in :100..:699");
-        return None;
-    };
-    let display = format!(":{n}");
-    let child = match Command::new("Xvfb")
-        .args([&display, "-screen", "0", "1400x900x24", "-nolisten", "tcp"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-    {
-        Ok(child) => child,
-        Err(e) => {
-            skip(&format!("Xvfb did not start: {e}"));
-            return None;
+/// The one way out of a window test that cannot run: fails under
+/// [`REQUIRE_WINDOW_TESTS`], otherwise says "skipped" on stderr. Written
+/// straight to stderr, past libtest's output capture (which takes
+/// `eprintln!`), so a skip shows in a passing `cargo test` run.
+fn skip(why: &str) {
+    match skip_verdict(std::env::var_os(REQUIRE_WINDOW_TESTS).as_deref(), why) {
+        Err(failure) => panic!("{failure}"),
+        Ok(note) => {
+            if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
+                panic!("cannot report the skip ({why}): {e}");
+            }
         }
-    };
-    let xvfb = Xvfb { child, display };
-    let socket = format!("/tmp/.X11-unix/X{n}");
-    let deadline = Instant::now() + Duration::from_secs(10);
-    while !Path::new(&socket).exists() {
-        if Instant::now() > deadline {
-            skip("Xvfb did not start");
-            return None;
-        }
-        std::thread::sleep(Duration::from_millis(50));
     }
-    Some(xvfb)
+}
+
+/// What a window test needs, or [`skip`] with the reason it cannot run.
+/// Helpers return `Err(reason)` for every way they can fail to set up, so
+/// no early return (`?`) can pass a test that ran nothing.
+fn or_skip<T>(ready: Result<T, String>) -> Option<T> {
+    ready.map_err(|why| skip(&why)).ok()
+}
+
+#[test]
+fn a_window_test_that_cannot_run_fails_only_when_required() {
+    let why = "Xvfb is not installed";
+    for unset in [None, Some(OsStr::new("")), Some(OsStr::new("0"))] {
+        let note = skip_verdict(unset, why).expect("not required: skip");
+        assert!(note.starts_with("skipped: Xvfb is not installed"), "{note}");
+    }
+    for set in ["1", "yes"] {
+        let failure = skip_verdict(Some(OsStr::new(set)), why).expect_err("required: fail");
+        assert!(
+            failure.contains(&format!("{REQUIRE_WINDOW_TESTS}={set}")) && failure.contains(why),
+            "{failure}"
+        );
+    }
+}
+
+/// `program` on `PATH`, or why the test cannot run without it.
+fn needs(program: &str, what_for: &str) -> Result<(), String> {
+    if on_path(program) {
+        Ok(())
+    } else {
+        Err(format!("{program} is not installed ({what_for})"))
+    }
+}
+
+/// Starts Xvfb on a free display. The window tests run in parallel in one
+/// process: each takes its own display number (a process-wide counter), as
+/// two tests that both saw the same number free would share one server,
+/// and the first to finish would kill the other's display. A number another
+/// process took meanwhile makes Xvfb exit at once: the next one is tried.
+fn start_xvfb() -> Result<Xvfb, String> {
+    static NEXT: AtomicU32 = AtomicU32::new(0);
+    needs("Xvfb", "apt-get install xvfb to run this test")?;
+    let base = 100 + std::process::id() % 300;
+    let mut last_failure = String::from("no free X display number in :100..:699");
+    for _ in 0..20 {
+        let n = base + NEXT.fetch_add(1, Ordering::Relaxed) % 300;
+        let socket = format!("/tmp/.X11-unix/X{n}");
+        if Path::new(&socket).exists() || Path::new(&format!("/tmp/.X{n}-lock")).exists() {
+            continue;
+        }
+        let display = format!(":{n}");
+        let child = Command::new("Xvfb")
+            .args([&display, "-screen", "0", "1400x900x24", "-nolisten", "tcp"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .map_err(|e| format!("Xvfb did not start: {e}"))?;
+        let mut xvfb = Xvfb { child, display };
+        let deadline = Instant::now() + Duration::from_secs(10);
+        loop {
+            if let Ok(Some(status)) = xvfb.child.try_wait() {
+                last_failure = format!("Xvfb exited at start-up on :{n} ({status})");
+                break;
+            }
+            if Path::new(&socket).exists() {
+                return Ok(xvfb);
+            }
+            if Instant::now() > deadline {
+                return Err(format!("Xvfb did not open {socket} within 10 s"));
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    Err(last_failure)
 }
 
 #[test]
 fn real_window_under_xvfb_shows_the_run_and_closes_on_ctrl_c() {
-    let Some(x) = start_xvfb() else { return };
+    let Some(x) = or_skip(start_xvfb()) else {
+        return;
+    };
     let dir = tempfile::tempdir().unwrap();
     let snaps = dir.path().join("snaps");
     let log = dir.path().join("stderr.txt");
@@ -319,11 +380,10 @@ fn on_path(program: &str) -> bool {
 
 #[test]
 fn closing_the_sim_window_stops_the_run_safely() {
-    if !on_path("xdotool") {
-        skip("xdotool is not installed (it presses Esc in the window)");
+    let ready = needs("xdotool", "it presses Esc in the window").and_then(|()| start_xvfb());
+    let Some(x) = or_skip(ready) else {
         return;
-    }
-    let Some(x) = start_xvfb() else { return };
+    };
     let dir = tempfile::tempdir().unwrap();
     let scenario = dir.path().join("long.toml");
     std::fs::write(

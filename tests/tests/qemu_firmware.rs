@@ -14,8 +14,10 @@
 //! naming it does.
 //!
 //! Skips (with a message) when `qemu-system-arm` is not installed, unless
-//! `DEXITAC_REQUIRE_QEMU=1`, which turns the skip into a failure (CI).
+//! `DEXITAC_REQUIRE_QEMU` is set (to anything but empty or `0`; CI sets
+//! `1`), which turns the skip into a failure.
 
+use std::ffi::OsStr;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -56,7 +58,55 @@ fn workspace_root() -> PathBuf {
         .to_path_buf()
 }
 
-/// Whether QEMU is here; otherwise skip, or fail under `DEXITAC_REQUIRE_QEMU=1`.
+/// The variable that makes this test required (`.ci/run` sets it).
+const REQUIRE_QEMU: &str = "DEXITAC_REQUIRE_QEMU";
+
+/// What the test does when it cannot run: `Ok(note)` to skip, printing the
+/// note, or `Err(message)` to fail, when `required` (the value of
+/// [`REQUIRE_QEMU`]) is set to anything but empty or `0`.
+fn skip_verdict(required: Option<&OsStr>, why: &str) -> Result<String, String> {
+    match required {
+        Some(v) if !v.is_empty() && v != "0" => Err(format!(
+            "{REQUIRE_QEMU}={} requires this test to run, but {why}",
+            v.to_string_lossy()
+        )),
+        _ => Ok(format!(
+            "SKIPPED qemu_firmware: {why} (set {REQUIRE_QEMU}=1 to make this a failure)\n"
+        )),
+    }
+}
+
+/// The one way out of the test when it cannot run: fails under
+/// [`REQUIRE_QEMU`], otherwise says so straight to stderr, past libtest's
+/// output capture, so the skip shows in a normal `cargo test` run.
+fn skip(why: &str) {
+    match skip_verdict(std::env::var_os(REQUIRE_QEMU).as_deref(), why) {
+        Err(failure) => panic!("{failure}"),
+        Ok(note) => {
+            if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
+                panic!("cannot report the skip ({why}): {e}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_qemu_test_fails_when_it_cannot_run_only_if_required() {
+    let why = "qemu-system-arm not found";
+    for unset in [None, Some(OsStr::new("")), Some(OsStr::new("0"))] {
+        let note = skip_verdict(unset, why).expect("not required: skip");
+        assert!(note.contains(why), "{note}");
+    }
+    for set in ["1", "yes"] {
+        let failure = skip_verdict(Some(OsStr::new(set)), why).expect_err("required: fail");
+        assert!(
+            failure.contains(&format!("{REQUIRE_QEMU}={set}")) && failure.contains(why),
+            "{failure}"
+        );
+    }
+}
+
+/// Whether QEMU is here; otherwise [`skip`].
 fn qemu_available() -> bool {
     let found = Command::new("qemu-system-arm")
         .arg("--version")
@@ -65,18 +115,7 @@ fn qemu_available() -> bool {
         .status()
         .is_ok_and(|s| s.success());
     if !found {
-        let required = std::env::var("DEXITAC_REQUIRE_QEMU").is_ok_and(|v| v == "1");
-        assert!(
-            !required,
-            "qemu-system-arm not found, and DEXITAC_REQUIRE_QEMU=1 requires this test to run"
-        );
-        // Straight to stderr, past libtest's output capture, so the skip
-        // shows in a normal `cargo test` run.
-        let note = "SKIPPED qemu_firmware: qemu-system-arm not found \
-                    (apt-get install qemu-system-arm; DEXITAC_REQUIRE_QEMU=1 makes this a failure)\n";
-        if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
-            panic!("cannot report the skip: {e}");
-        }
+        skip("qemu-system-arm not found (apt-get install qemu-system-arm)");
     }
     found
 }
