@@ -1,5 +1,11 @@
 //! Safety of the whole loop against its two external hazards: the host
 //! process dying, and a noisy serial line.
+//!
+//! Real time, on purpose, for what only real time shows: a `dexitac` process
+//! killed or interrupted (SIGINT) while it drives the simulated board behind
+//! a pty, and the board's own 500 ms host-silence trip on the wall clock.
+//! The bounds are the firmware's deadline plus the board thread's tick; the
+//! noisy-line and tripped-run tests run on the virtual clock.
 
 use std::io::Write;
 use std::process::{Command, Stdio};

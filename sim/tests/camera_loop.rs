@@ -4,6 +4,10 @@
 //! camera is unplugged mid-run and comes back. Both sensors must keep
 //! producing contact observations, the loop must not end on the unplug, and
 //! the board must end disarmed.
+//!
+//! Real time, on purpose: what is measured is the camera source's threads
+//! (capture, reconnect after an unplug, halt) against the wall clock, which
+//! a virtual clock cannot drive. The bounds are counts of frames, not speeds.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};

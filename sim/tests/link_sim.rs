@@ -1,5 +1,8 @@
 //! The serial link against the simulated MCU (the firmware's own control
 //! core behind a pty), through the normal serial-port code path.
+//!
+//! Real time, on purpose: the pty, the serial-port crate's timeouts and the
+//! MCU thread are what is under test.
 
 use std::io::{Read, Write};
 use std::thread;
