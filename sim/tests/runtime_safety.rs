@@ -5,7 +5,9 @@
 //! stated time, with the gripper sealed and the MCU disarmed or tripped.
 //! Virtual time makes every bound exact: the same run gives the same times.
 
-use dexitac_protocol::{ArmState, ResetCause, ValveState, CHAMBER_COUNT};
+use dexitac_protocol::{
+    ArmState, Fault, ResetCause, ValveState, CHAMBER_COUNT, POSITIVE_TANK_MAX_PA,
+};
 use dexitac_rig::task_loop::{MCU_SILENCE_MS, SENSOR_TIMEOUT_MS};
 use dexitac_sim::rig::{run_scenario, Injection, Outcome, Pace, SimOptions, SimReport};
 use dexitac_sim::scenario::Scenario;
@@ -224,4 +226,34 @@ fn the_same_seed_gives_the_same_run() {
     };
     assert_eq!(seen(&a), seen(&b));
     assert_eq!(a.sim_s, b.sim_s);
+}
+
+#[test]
+fn a_sensor_reading_low_is_caught_by_the_firmwares_pump_limits() {
+    // The positive tank's sensor reads 20 kPa low: the regulation keeps its
+    // pump running while the tank really passes its target. The firmware's
+    // pump limits (run time, rise, stall) at their real values must stop it.
+    let r = run(vec![Injection::ReadingOffsetAt {
+        at_ms: AT_MS,
+        offset_pa: (-20_000, 0),
+    }]);
+    let Err(LoopError::McuFault(fault)) = r.loop_result else {
+        panic!("{:?}", r.loop_result);
+    };
+    // The rise check (a 1 s window, twice, plus the filter) sees a tank
+    // whose reading lags what its pump should give.
+    assert_eq!(fault.fault, Fault::PositivePumpNoRise, "{fault:?}");
+    let tripped = u64::from(fault.time_ms);
+    assert!(
+        (AT_MS..=AT_MS + 2 * 1_000 + 20).contains(&tripped),
+        "tripped at {tripped} ms"
+    );
+    assert_eq!(r.mcu_at_end.state, ArmState::Tripped);
+    assert!(!r.mcu_at_end.pumps.positive_on && !r.mcu_at_end.pumps.negative_on);
+    // The tank itself never reached its limit.
+    assert!(
+        r.mcu_at_end.tanks_pa.0 < POSITIVE_TANK_MAX_PA,
+        "{:?}",
+        r.mcu_at_end
+    );
 }
