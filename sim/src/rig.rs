@@ -25,7 +25,8 @@
 //!   the host keeps the 500 ms of *wall-clock* time it has on the rig
 //!   ([`SimOptions::stall_tolerance_ms`]), so the scheduling jitter of a busy
 //!   PC does not trip the simulated board any more than it would trip the
-//!   real one.
+//!   real one. The task loop's watchdogs (a silent sensor, a silent MCU) are
+//!   scaled the same way.
 //!
 //! # Outcome
 //!
@@ -500,10 +501,18 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     // The scenario file's rig tables, as `dexitac run --config` reads them;
     // `--no-tactile` (options.tactile_feedback = false) turns feedback off.
     let base = scenario.rig.control();
+    // Above real time the watchdogs get the wall-clock time they have on the
+    // rig, like the firmware's host-silence deadline (module docs).
+    let scale = match options.speed {
+        Pace::Times(speed) if speed > 1.0 => speed,
+        _ => 1.0,
+    };
     let control = ControlConfig {
         tactile_feedback: options.tactile_feedback && base.tactile_feedback,
         task: scenario.task.clone(),
         share_frames: options.share_frames,
+        sensor_timeout_ms: (base.sensor_timeout_ms as f64 * scale) as u64,
+        mcu_silence_ms: (base.mcu_silence_ms as f64 * scale) as u64,
         ..base
     };
     let params = Params::default();
