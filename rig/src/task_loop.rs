@@ -85,14 +85,16 @@
 //!   holding the object, and disarms the MCU: nobody moves an object the
 //!   host can no longer feel. It is the end of the run: a person decides
 //!   what happens to the object.
-//! - **The MCU goes silent** while its telemetry is on, for
-//!   [`ControlConfig::mcu_silence_ms`]: the loop says hello. If the MCU
-//!   answers it has restarted (the firmware boots disarmed, valves sealed,
-//!   telemetry off), and the run ends with [`RuntimeError::McuReset`] and
-//!   its reset cause; a run is never re-armed behind a person's back.
-//!   Without an answer, the link's error ends the run; the board then
-//!   trips on host silence on its own. A telemetry clock that runs
-//!   backwards is a reset as well.
+//! - **The MCU's telemetry stops** for [`ControlConfig::mcu_silence_ms`]
+//!   while it is on: the loop says hello and listens for as long again. If
+//!   the MCU answers but its telemetry stays off, it has restarted (the
+//!   firmware boots disarmed, valves sealed, telemetry off), and the run
+//!   ends with [`RuntimeError::McuReset`] and the reset cause of its hello,
+//!   within twice that time; a run is never re-armed behind a person's
+//!   back. Telemetry again means it was only late, and the run goes on.
+//!   Without an answer, the link's error ends the run; the board then trips
+//!   on host silence on its own. A telemetry clock that runs backwards is a
+//!   reset as well.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
@@ -686,9 +688,48 @@ impl<P: Port> Control<'_, P> {
 
     fn on_mcu(&mut self) -> Result<(), RuntimeError> {
         self.link.keep_alive()?;
-        for event in self.link.poll(Duration::ZERO)? {
+        let events = self.link.poll(Duration::ZERO)?;
+        self.on_mcu_events(events, None)?;
+        let silence = self.telemetry_on_since_us.map(|since| {
+            let asked = Duration::from_micros(self.clock.now_us().saturating_sub(since));
+            self.link.telemetry_silent_for().min(asked)
+        });
+        let limit = Duration::from_millis(self.config.mcu_silence_ms);
+        if let Some(silence) = silence.filter(|s| *s > limit) {
+            // No answer to the hello: the link's error ends the run. An
+            // answer and still no telemetry for as long again: it restarted
+            // (telemetry is off after a boot). Telemetry again: it was only
+            // late (a busy MCU thread in the simulator, a slow USB adapter).
+            tracing::warn!("task loop: no telemetry from the MCU for {silence:?}: saying hello");
+            let reply = self.link.hello()?;
+            let late = self.link.poll(limit)?;
+            if self.on_mcu_events(late, Some(reply.reset_cause))? {
+                tracing::warn!(
+                    "task loop: the MCU's telemetry resumed ({:?} late); it did not restart",
+                    silence
+                );
+            } else {
+                return Err(RuntimeError::McuReset {
+                    cause: Some(reply.reset_cause),
+                    t_ms: self.clock.now_ms(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Handles the MCU's events; whether one was telemetry. `cause`: the
+    /// reset cause a hello just reported, for a reset seen among them.
+    fn on_mcu_events(
+        &mut self,
+        events: Vec<McuEvent>,
+        cause: Option<ResetCause>,
+    ) -> Result<bool, RuntimeError> {
+        let mut telemetry_seen = false;
+        for event in events {
             match event {
                 McuEvent::Telemetry(telemetry) => {
+                    telemetry_seen = true;
                     self.positive_tank_pa = Some(telemetry.positive_tank_pa);
                     let _ = self.events.send(RuntimeEvent::Telemetry {
                         t_ms: self.clock.now_ms(),
@@ -698,29 +739,13 @@ impl<P: Port> Control<'_, P> {
                 McuEvent::Fault(fault) => return Err(RuntimeError::McuFault(fault)),
                 McuEvent::McuReset => {
                     return Err(RuntimeError::McuReset {
-                        cause: None,
+                        cause,
                         t_ms: self.clock.now_ms(),
                     })
                 }
             }
         }
-        let silence = self.telemetry_on_since_us.map(|since| {
-            let asked = Duration::from_micros(self.clock.now_us().saturating_sub(since));
-            self.link.telemetry_silent_for().min(asked)
-        });
-        if let Some(silence) =
-            silence.filter(|s| *s > Duration::from_millis(self.config.mcu_silence_ms))
-        {
-            // Alive but without the telemetry it was asked for: it restarted
-            // (telemetry is off after a boot). No answer: the link's error.
-            tracing::warn!("task loop: the MCU has been silent for {silence:?}: saying hello");
-            let reply = self.link.hello()?;
-            return Err(RuntimeError::McuReset {
-                cause: Some(reply.reset_cause),
-                t_ms: self.clock.now_ms(),
-            });
-        }
-        Ok(())
+        Ok(telemetry_seen)
     }
 
     /// Notes the time of a pass of the loop (for the longest gap).

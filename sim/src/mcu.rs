@@ -491,6 +491,15 @@ pub enum McuInjection {
         /// When, ms.
         at_ms: u64,
     },
+    /// The MCU does nothing from this time for this long, then catches up
+    /// tick by tick (a starved MCU thread, a late USB adapter): no tick,
+    /// no byte in or out meanwhile.
+    StallAt {
+        /// When, ms.
+        at_ms: u64,
+        /// For how long, ms.
+        for_ms: u64,
+    },
     /// From this time on, the pressure sensors read this much more than the
     /// tanks hold (a sensor fault), Pa.
     ReadingOffsetAt {
@@ -510,6 +519,8 @@ struct VirtualState {
     /// When the line towards each side is free again, µs.
     line_free_us: (u64, u64),
     injections: Vec<McuInjection>,
+    /// An injected stall: (from, until), ms.
+    stall: Option<(u64, u64)>,
 }
 
 impl VirtualState {
@@ -523,6 +534,11 @@ impl VirtualState {
             let next_ms = self.core.world_ms + self.core.tick_ms;
             if next_ms * 1_000 > now_us {
                 break;
+            }
+            if let Some((from, until)) = self.stall {
+                if next_ms > from && now_us < until * 1_000 {
+                    break;
+                }
             }
             self.inject(next_ms);
             self.deliver_to_mcu(next_ms * 1_000);
@@ -539,6 +555,7 @@ impl VirtualState {
                 core.reset();
                 false
             }
+            McuInjection::StallAt { .. } => false,
             McuInjection::ReadingOffsetAt { at_ms, offset_pa } if at_ms <= t_ms => {
                 core.hw.reading_offset_pa = offset_pa;
                 false
@@ -605,6 +622,7 @@ impl VirtualMcu {
                 to_host: VecDeque::new(),
                 line_free_us: (0, 0),
                 injections: Vec::new(),
+                stall: None,
             })),
             clock,
         }
@@ -617,7 +635,12 @@ impl VirtualMcu {
 
     /// Schedules `injection`.
     pub fn inject(&self, injection: McuInjection) {
-        lock_virtual(&self.state).injections.push(injection);
+        let mut state = lock_virtual(&self.state);
+        if let McuInjection::StallAt { at_ms, for_ms } = injection {
+            state.stall = Some((at_ms, at_ms + for_ms));
+        } else {
+            state.injections.push(injection);
+        }
     }
 
     /// The host's end of the serial line; a read that finds no byte waits
@@ -673,10 +696,13 @@ impl io::Read for VirtualPort {
             if ready || now_us >= deadline_us {
                 break;
             }
-            // On to the next byte's arrival or the next tick, whichever is first.
+            // On to the next byte's arrival or the next tick, whichever is
+            // first; a millisecond at least (a stalled MCU's next tick lies
+            // in the past).
             let next_tick_us = (state.core.world_ms + state.core.tick_ms) * 1_000;
             let next_byte_us = state.to_host.front().map_or(u64::MAX, |(at, _)| *at);
-            clock.sleep_until_us(next_tick_us.min(next_byte_us).min(deadline_us));
+            let next_us = next_tick_us.min(next_byte_us).max(now_us + 1_000);
+            clock.sleep_until_us(next_us.min(deadline_us));
         }
         let now_us = clock.now_us();
         let mut n = 0;

@@ -127,7 +127,7 @@ impl Renderer {
     ///
     /// Only what the contact changes is drawn: the frame without contact
     /// for this frame's noise field is made once, and a contact redraws the
-    /// box around the markers it moves by more than [`MOVED_PX`].
+    /// box around the markers it moves by more than 0.001 px.
     pub fn render(&mut self, contact: Option<&ContactState>) -> GreyFrame {
         let press = contact.map(|c| self.press(c));
         let noise_index = (self.frame_index % NOISE_BANK as u64) as usize;

@@ -5,7 +5,7 @@
 //! ([`crate::render`]) and a pipeline calibrated on its rest frames, connects
 //! the normal [`dexitac_rig::link::Link`] to a simulated MCU that steps the
 //! plant, and runs [`dexitac_rig::task_loop::run`]. The run ends at the
-//! scenario's duration, [`AFTER_END_MS`] after the object fell or the host
+//! scenario's duration, 1.5 s after the object fell or the host
 //! released it, or when the caller's stop flag is set (Ctrl-C).
 //!
 //! # Pace
@@ -122,6 +122,14 @@ pub enum Injection {
     McuResetAt {
         /// When, ms of simulated time.
         at_ms: u64,
+    },
+    /// The MCU stops for a while, then catches up (see
+    /// [`McuInjection::StallAt`]).
+    McuStallAt {
+        /// When, ms.
+        at_ms: u64,
+        /// For how long, ms.
+        for_ms: u64,
     },
     /// A pressure sensor starts reading high or low (see
     /// [`McuInjection::ReadingOffsetAt`]).
@@ -572,6 +580,9 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
             for injection in &options.injections {
                 match *injection {
                     Injection::McuResetAt { at_ms } => mcu.inject(McuInjection::ResetAt { at_ms }),
+                    Injection::McuStallAt { at_ms, for_ms } => {
+                        mcu.inject(McuInjection::StallAt { at_ms, for_ms })
+                    }
                     Injection::ReadingOffsetAt { at_ms, offset_pa } => {
                         mcu.inject(McuInjection::ReadingOffsetAt { at_ms, offset_pa })
                     }
