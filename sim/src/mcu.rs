@@ -209,6 +209,28 @@ impl SimMcu {
         SimMcu::spawn_inner(config, Some(plant))
     }
 
+    /// Like [`SimMcu::spawn_with_plant`], on an in-process serial line
+    /// instead of a pty: the returned port is the host's end (reads time out
+    /// after `read_timeout`). No kernel worker carries its bytes: on a pty,
+    /// the tty layer's worker thread that moves them between the two ends
+    /// was seen runnable but without a CPU for 1.25 s next to a release
+    /// build (BENCHMARKS.md, "The real-time stall"), and the host's link
+    /// waited for it. [`SimMcu::port_path`] is empty.
+    pub fn spawn_with_plant_in_process(
+        config: SimMcuConfig,
+        plant: SharedPlant,
+        read_timeout: Duration,
+    ) -> io::Result<(SimMcu, LinePort)> {
+        let (host, mcu) = LinePort::pair(read_timeout, Duration::from_millis(1));
+        let sim = SimMcu::start(
+            config,
+            Some(plant),
+            PathBuf::new(),
+            move |config, plant, shared, stop| run(mcu, config, plant, shared, stop),
+        )?;
+        Ok((sim, host))
+    }
+
     fn spawn_inner(config: SimMcuConfig, plant: Option<SharedPlant>) -> io::Result<SimMcu> {
         let (mut master, slave) = TTYPort::pair().map_err(io::Error::from)?;
         master
@@ -218,6 +240,28 @@ impl SimMcu {
             .name()
             .map(PathBuf::from)
             .ok_or_else(|| io::Error::other("pty without a name"))?;
+        SimMcu::start(
+            config,
+            plant,
+            port_path,
+            move |config, plant, shared, stop| {
+                // The slave end stays open in the thread so the pty does not
+                // hang up while the host closes and reopens its port.
+                let _slave = slave;
+                run(master, config, plant, shared, stop)
+            },
+        )
+    }
+
+    /// Starts the MCU thread running `body` on the shared state.
+    fn start(
+        config: SimMcuConfig,
+        plant: Option<SharedPlant>,
+        port_path: PathBuf,
+        body: impl FnOnce(SimMcuConfig, Option<SharedPlant>, &Mutex<Shared>, &AtomicBool) -> io::Result<()>
+            + Send
+            + 'static,
+    ) -> io::Result<SimMcu> {
         let hw = new_hw(&config);
         let controller = new_controller(&config, &config.calibration_page, ResetCause::PowerOn);
         let shared = Arc::new(Mutex::new(Shared {
@@ -230,9 +274,7 @@ impl SimMcu {
             let (shared, stop) = (Arc::clone(&shared), Arc::clone(&stop));
             std::thread::Builder::new()
                 .name("sim-mcu".into())
-                // The slave end stays open in the thread so the pty does not
-                // hang up while the host closes and reopens its port.
-                .spawn(move || run(master, slave, config, plant, &shared, &stop))?
+                .spawn(move || body(config, plant, &shared, &stop))?
         };
         Ok(SimMcu {
             port_path,
@@ -423,8 +465,7 @@ impl McuCore {
 /// The MCU thread: read bytes, run the 1 kHz ticks due on the simulated
 /// clock, write the replies.
 fn run(
-    mut port: TTYPort,
-    _slave: TTYPort,
+    mut port: impl io::Read + Write,
     config: SimMcuConfig,
     plant: Option<SharedPlant>,
     shared: &Mutex<Shared>,
@@ -478,6 +519,76 @@ fn run(
         guard.calibration = core.controller.calibration_report();
     }
     Ok(())
+}
+
+/// One end of an in-process serial line: bytes written at one end are read
+/// at the other, in order; a read waits up to its timeout for the first byte
+/// and returns 0 when none came.
+pub struct LinePort {
+    rx: Arc<Pipe>,
+    tx: Arc<Pipe>,
+    read_timeout: Duration,
+}
+
+#[derive(Default)]
+struct Pipe {
+    bytes: Mutex<VecDeque<u8>>,
+    ready: std::sync::Condvar,
+}
+
+impl LinePort {
+    /// The two ends, with their read timeouts.
+    pub fn pair(timeout_a: Duration, timeout_b: Duration) -> (LinePort, LinePort) {
+        let (ab, ba) = (Arc::new(Pipe::default()), Arc::new(Pipe::default()));
+        (
+            LinePort {
+                rx: Arc::clone(&ba),
+                tx: Arc::clone(&ab),
+                read_timeout: timeout_a,
+            },
+            LinePort {
+                rx: ab,
+                tx: ba,
+                read_timeout: timeout_b,
+            },
+        )
+    }
+}
+
+impl io::Read for LinePort {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        let guard = self
+            .rx
+            .bytes
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let (mut bytes, _) = self
+            .rx
+            .ready
+            .wait_timeout_while(guard, self.read_timeout, |b| b.is_empty())
+            .unwrap_or_else(|poisoned| poisoned.into_inner());
+        let n = buf.len().min(bytes.len());
+        for (slot, b) in buf.iter_mut().zip(bytes.drain(..n)) {
+            *slot = b;
+        }
+        Ok(n)
+    }
+}
+
+impl Write for LinePort {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.tx
+            .bytes
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .extend(buf);
+        self.tx.ready.notify_all();
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
 }
 
 /// Serial line time of one byte at 115 200 baud (start, 8 data, stop bits), µs.
@@ -731,5 +842,31 @@ impl Write for VirtualPort {
 
     fn flush(&mut self) -> io::Result<()> {
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Read;
+
+    #[test]
+    fn an_in_process_line_carries_bytes_in_order_and_its_reads_time_out() {
+        let (mut a, mut b) = LinePort::pair(Duration::from_millis(1), Duration::from_millis(1));
+        let mut buf = [0u8; 8];
+        assert_eq!(b.read(&mut buf).unwrap(), 0, "nothing sent yet");
+        a.write_all(&[1, 2, 3]).unwrap();
+        a.write_all(&[4]).unwrap();
+        assert_eq!(b.read(&mut buf[..2]).unwrap(), 2);
+        assert_eq!(&buf[..2], &[1, 2]);
+        assert_eq!(b.read(&mut buf).unwrap(), 2);
+        assert_eq!(&buf[..2], &[3, 4]);
+        // The other way, from another thread, while the reader waits.
+        let (mut c, mut d) = LinePort::pair(Duration::from_secs(5), Duration::from_millis(1));
+        let writer = std::thread::spawn(move || d.write_all(&[9]).unwrap());
+        assert_eq!(c.read(&mut buf).unwrap(), 1);
+        assert_eq!(buf[0], 9);
+        writer.join().unwrap();
+        assert_eq!(a.read(&mut buf).unwrap(), 0, "nothing came back to a");
     }
 }

@@ -19,14 +19,17 @@
 //!   and the same scenario and seed give the same run, event for event.
 //!   Faults can be injected ([`SimOptions::injections`]).
 //! - [`Pace::Times`] (the live view, soak tests): real time, `speed` times
-//!   faster; the MCU runs on its own thread behind a pty
-//!   ([`SimMcu::spawn_with_plant`]) and a monitor thread ends the run. Above
+//!   faster; the MCU runs on its own thread, on an in-process serial line
+//!   ([`SimMcu::spawn_with_plant_in_process`]: a pty's bytes pass through a
+//!   kernel worker that a busy machine can starve for over a second), and a
+//!   monitor thread ends the run. Above
 //!   real time the firmware's host-silence deadline is scaled by the speed:
 //!   the host keeps the 500 ms of *wall-clock* time it has on the rig
 //!   ([`SimOptions::stall_tolerance_ms`]), so the scheduling jitter of a busy
 //!   PC does not trip the simulated board any more than it would trip the
 //!   real one. The task loop's watchdogs (a silent sensor, a silent MCU) are
-//!   scaled the same way.
+//!   scaled the same way, and by the stall tolerance over the firmware's
+//!   500 ms.
 //!
 //! # Outcome
 //!
@@ -509,11 +512,16 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
     // The scenario file's rig tables, as `dexitac run --config` reads them;
     // `--no-tactile` (options.tactile_feedback = false) turns feedback off.
     let base = scenario.rig.control();
-    // Above real time the watchdogs get the wall-clock time they have on the
-    // rig, like the firmware's host-silence deadline (module docs).
+    // In real time the watchdogs get the wall-clock time they have on the
+    // rig, and the stall tolerance asked for, like the firmware's
+    // host-silence deadline (module docs).
     let scale = match options.speed {
-        Pace::Times(speed) if speed > 1.0 => speed,
-        _ => 1.0,
+        Pace::Times(speed) => {
+            let tolerance = f64::from(options.stall_tolerance_ms)
+                / f64::from(dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS);
+            speed.max(1.0) * tolerance.max(1.0)
+        }
+        Pace::Max => 1.0,
     };
     let control = ControlConfig {
         tactile_feedback: options.tactile_feedback && base.tactile_feedback,
@@ -633,7 +641,14 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
                 host_silence_ms: (f64::from(options.stall_tolerance_ms) * speed.max(1.0)) as u32,
                 ..dexitac_firmware::Config::default()
             };
-            let mcu = SimMcu::spawn_with_plant(
+            let link_config = LinkConfig {
+                // Link timeouts run on the simulated clock.
+                ack_timeout_ms: ((f64::from(options.stall_tolerance_ms / 4) * speed) as u64)
+                    .max(20),
+                ..LinkConfig::default()
+            };
+            // An in-process line, not a pty: see SimMcu::spawn_with_plant_in_process.
+            let (mcu, port) = SimMcu::spawn_with_plant_in_process(
                 SimMcuConfig {
                     firmware,
                     clock: Some(clock.clone()),
@@ -641,20 +656,8 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
                     ..SimMcuConfig::default()
                 },
                 Arc::clone(&plant),
+                Duration::from_millis(link_config.read_timeout_ms.max(1)),
             )?;
-            let link_config = LinkConfig {
-                // Link timeouts run on the simulated clock.
-                ack_timeout_ms: ((f64::from(options.stall_tolerance_ms / 4) * speed) as u64)
-                    .max(20),
-                ..LinkConfig::default()
-            };
-            let port = serialport::new(mcu.port_path().to_string_lossy(), link_config.baud)
-                .timeout(Duration::from_millis(link_config.read_timeout_ms.max(1)))
-                .open()
-                .map_err(|source| LinkError::Open {
-                    path: mcu.port_path().to_path_buf(),
-                    source,
-                })?;
             let port: Box<dyn Port> = if options.line_error_rate > 0.0 {
                 Box::new(NoisyPort::new(port, options.line_error_rate, options.seed))
             } else {
