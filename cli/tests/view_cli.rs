@@ -2,8 +2,6 @@
 //! simulated run and of `dexitac view --render`, clear messages without a
 //! display, and (when `Xvfb` is installed) the real window.
 
-use std::ffi::OsStr;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -12,6 +10,9 @@ use std::time::{Duration, Instant};
 use dexitac_view::draw::{INFLATE_COLOUR, NO_FRAME, POSITIVE_TANK_COLOUR};
 use dexitac_view::layout::Rect;
 use dexitac_view::Layout;
+
+#[path = "../../tests/support/required.rs"]
+mod required;
 
 fn dexitac() -> Command {
     Command::new(env!("CARGO_BIN_EXE_dexitac"))
@@ -227,34 +228,11 @@ impl Drop for Xvfb {
 /// and installs Xvfb and xdotool).
 const REQUIRE_WINDOW_TESTS: &str = "DEXITAC_REQUIRE_WINDOW_TESTS";
 
-/// What a window test that cannot run does: `Ok(note)` to skip, printing
-/// the note, or `Err(message)` to fail, when `required` (the value of
-/// [`REQUIRE_WINDOW_TESTS`]) is set to anything but empty or `0`.
-fn skip_verdict(required: Option<&OsStr>, why: &str) -> Result<String, String> {
-    match required {
-        Some(v) if !v.is_empty() && v != "0" => Err(format!(
-            "{REQUIRE_WINDOW_TESTS}={} requires the window tests to run, but {why}",
-            v.to_string_lossy()
-        )),
-        _ => Ok(format!(
-            "skipped: {why} (set {REQUIRE_WINDOW_TESTS}=1 to make this a failure)\n"
-        )),
-    }
-}
-
 /// The one way out of a window test that cannot run: fails under
-/// [`REQUIRE_WINDOW_TESTS`], otherwise says "skipped" on stderr. Written
-/// straight to stderr, past libtest's output capture (which takes
-/// `eprintln!`), so a skip shows in a passing `cargo test` run.
+/// [`REQUIRE_WINDOW_TESTS`], otherwise says "skipped" on stderr
+/// (`tests/support/required.rs`).
 fn skip(why: &str) {
-    match skip_verdict(std::env::var_os(REQUIRE_WINDOW_TESTS).as_deref(), why) {
-        Err(failure) => panic!("{failure}"),
-        Ok(note) => {
-            if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
-                panic!("cannot report the skip ({why}): {e}");
-            }
-        }
-    }
+    required::skip(REQUIRE_WINDOW_TESTS, "the window tests", why);
 }
 
 /// What a window test needs, or [`skip`] with the reason it cannot run.
@@ -266,18 +244,7 @@ fn or_skip<T>(ready: Result<T, String>) -> Option<T> {
 
 #[test]
 fn a_window_test_that_cannot_run_fails_only_when_required() {
-    let why = "Xvfb is not installed";
-    for unset in [None, Some(OsStr::new("")), Some(OsStr::new("0"))] {
-        let note = skip_verdict(unset, why).expect("not required: skip");
-        assert!(note.starts_with("skipped: Xvfb is not installed"), "{note}");
-    }
-    for set in ["1", "yes"] {
-        let failure = skip_verdict(Some(OsStr::new(set)), why).expect_err("required: fail");
-        assert!(
-            failure.contains(&format!("{REQUIRE_WINDOW_TESTS}={set}")) && failure.contains(why),
-            "{failure}"
-        );
-    }
+    required::check_verdicts(REQUIRE_WINDOW_TESTS);
 }
 
 /// `program` on `PATH`, or why the test cannot run without it.

@@ -17,7 +17,6 @@
 //! `DEXITAC_REQUIRE_QEMU` is set (to anything but empty or `0`; CI sets
 //! `1`), which turns the skip into a failure.
 
-use std::ffi::OsStr;
 use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -33,6 +32,9 @@ use dexitac_protocol::{
     NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
 };
 use serialport::TTYPort;
+
+#[path = "../support/required.rs"]
+mod required;
 
 /// The firmware's host-silence deadline (its default configuration).
 const SILENCE_MS: u32 = dexitac_firmware::control::DEFAULT_HOST_SILENCE_MS;
@@ -61,49 +63,16 @@ fn workspace_root() -> PathBuf {
 /// The variable that makes this test required (`.ci/run` sets it).
 const REQUIRE_QEMU: &str = "DEXITAC_REQUIRE_QEMU";
 
-/// What the test does when it cannot run: `Ok(note)` to skip, printing the
-/// note, or `Err(message)` to fail, when `required` (the value of
-/// [`REQUIRE_QEMU`]) is set to anything but empty or `0`.
-fn skip_verdict(required: Option<&OsStr>, why: &str) -> Result<String, String> {
-    match required {
-        Some(v) if !v.is_empty() && v != "0" => Err(format!(
-            "{REQUIRE_QEMU}={} requires this test to run, but {why}",
-            v.to_string_lossy()
-        )),
-        _ => Ok(format!(
-            "SKIPPED qemu_firmware: {why} (set {REQUIRE_QEMU}=1 to make this a failure)\n"
-        )),
-    }
-}
-
 /// The one way out of the test when it cannot run: fails under
-/// [`REQUIRE_QEMU`], otherwise says so straight to stderr, past libtest's
-/// output capture, so the skip shows in a normal `cargo test` run.
+/// [`REQUIRE_QEMU`], otherwise says "skipped" on stderr
+/// (`tests/support/required.rs`).
 fn skip(why: &str) {
-    match skip_verdict(std::env::var_os(REQUIRE_QEMU).as_deref(), why) {
-        Err(failure) => panic!("{failure}"),
-        Ok(note) => {
-            if let Err(e) = std::io::stderr().write_all(note.as_bytes()) {
-                panic!("cannot report the skip ({why}): {e}");
-            }
-        }
-    }
+    required::skip(REQUIRE_QEMU, "the QEMU firmware test", why);
 }
 
 #[test]
 fn the_qemu_test_fails_when_it_cannot_run_only_if_required() {
-    let why = "qemu-system-arm not found";
-    for unset in [None, Some(OsStr::new("")), Some(OsStr::new("0"))] {
-        let note = skip_verdict(unset, why).expect("not required: skip");
-        assert!(note.contains(why), "{note}");
-    }
-    for set in ["1", "yes"] {
-        let failure = skip_verdict(Some(OsStr::new(set)), why).expect_err("required: fail");
-        assert!(
-            failure.contains(&format!("{REQUIRE_QEMU}={set}")) && failure.contains(why),
-            "{failure}"
-        );
-    }
+    required::check_verdicts(REQUIRE_QEMU);
 }
 
 /// Whether QEMU is here; otherwise [`skip`].
