@@ -314,7 +314,8 @@ impl<P: Port> Link<P> {
 
     /// Time since the last valid frame from the MCU (or since the link was
     /// made), on the link's clock. With telemetry on, a value of several
-    /// telemetry periods means the MCU reset or the line is dead.
+    /// telemetry periods means the line is dead; a board that restarted
+    /// still acks, so see [`Link::telemetry_silent_for`] for that.
     pub fn silent_for(&self) -> Duration {
         Duration::from_micros(self.clock.now_us().saturating_sub(self.last_rx_us))
     }

@@ -25,6 +25,10 @@
 //! ([`SimMcuConfig::clock`]). The plant's time keeps running across an MCU
 //! reset; the firmware's own clock restarts from zero.
 //!
+//! [`SimMcu::spawn_with_plant_in_process`] runs the same thread on an
+//! in-process serial line ([`LinePort`]) instead of a pty, for the simulator
+//! in real time: no kernel worker carries its bytes.
+//!
 //! [`VirtualMcu`] is the same core on a virtual clock, for runs that repeat
 //! exactly: no thread and no pty, it runs when its [`VirtualPort`] is read
 //! or written, and faults can be scheduled into it ([`McuInjection`]).
