@@ -25,7 +25,7 @@
 //! - `summary.json`: `status` is `ok` for a run that did not fail, else the
 //!   failure in words with its simulated time (a trip's from the MCU's fault
 //!   event, else the end of the run): `tripped: HostSilence at 11.3 s`,
-//!   `MCU reset at 4.2 s`, `error: <message>`; `outcome` is `failed` (never `held`), and
+//!   `MCU reset, noticed at 4.2 s`, `error: <message>`; `outcome` is `failed` (never `held`), and
 //!   `object_at_end` keeps what became of the object (`held`, `dropped`,
 //!   `released`, `not_grasped`: the same as `outcome` when the run did not
 //!   fail);
@@ -524,7 +524,7 @@ pub struct Summary {
     /// The scenario's name.
     pub scenario: String,
     /// `ok`, or how the run failed and when (simulated time):
-    /// `tripped: HostSilence at 11.3 s`, `MCU reset at 4.2 s`,
+    /// `tripped: HostSilence at 11.3 s`, `MCU reset, noticed at 4.2 s`,
     /// `error: <message>` ([module docs](self#failed-runs)).
     pub status: String,
     /// The manipulation task, if the scenario has one and it started (its
