@@ -767,11 +767,6 @@ impl VirtualMcu {
         }
     }
 
-    /// Runs the MCU and the plant up to the clock's time.
-    pub fn catch_up(&self) {
-        lock_virtual(&self.state).catch_up(self.clock.now_us());
-    }
-
     /// Runs the MCU and the plant up to `t_us` (no further than the clock).
     pub fn catch_up_to(&self, t_us: u64) {
         lock_virtual(&self.state).catch_up(t_us.min(self.clock.now_us()));

@@ -610,6 +610,7 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
                 duration_ms,
                 &control.grasp_chambers,
                 Arc::clone(&stop),
+                Arc::clone(&options.stop),
                 Arc::clone(&live),
                 options.status,
             ));
@@ -694,13 +695,15 @@ pub fn run_scenario(scenario: &Scenario, options: &SimOptions) -> Result<SimRepo
 }
 
 /// On the virtual clock, the monitor's job, run by the MCU after every
-/// tick: ends the run at the scenario's duration or [`AFTER_END_MS`] after
+/// tick: ends the run at the scenario's duration, [`AFTER_END_MS`] after
 /// the object fell or the grasping chambers were all set to deflate (the
-/// host released), and prints the status line.
+/// host released), or on the caller's stop request, and prints the status
+/// line.
 fn end_watch(
     duration_ms: u64,
     grasp_chambers: &[usize],
     stop: Arc<AtomicBool>,
+    requested: Arc<AtomicBool>,
     live: Arc<Mutex<Live>>,
     status: bool,
 ) -> crate::mcu::TickObserver {
@@ -715,11 +718,14 @@ fn end_watch(
         if all_deflate {
             released_ms.get_or_insert(t_ms);
         }
-        let ended = plant
-            .dropped_at_ms()
-            .or(released_ms)
-            .is_some_and(|t| t_ms > t + AFTER_END_MS);
-        if t_ms >= duration_ms || ended {
+        let requested = requested.load(Ordering::Relaxed);
+        if run_is_over(
+            t_ms,
+            duration_ms,
+            plant.dropped_at_ms(),
+            released_ms,
+            requested,
+        ) {
             stop.store(true, Ordering::Relaxed);
         }
         if status && last_status.elapsed() >= STATUS_PERIOD {
@@ -731,6 +737,21 @@ fn end_watch(
             eprint!("\r{}", status_line(plant.state(), &phase, &centres));
         }
     })
+}
+
+/// Whether a run is over at `now_ms`: the scenario's duration reached,
+/// [`AFTER_END_MS`] past a drop or a release, or a stop requested (Ctrl-C).
+fn run_is_over(
+    now_ms: u64,
+    duration_ms: u64,
+    dropped_ms: Option<u64>,
+    released_ms: Option<u64>,
+    requested: bool,
+) -> bool {
+    let settled = dropped_ms
+        .or(released_ms)
+        .is_some_and(|t| now_ms > t + AFTER_END_MS);
+    now_ms >= duration_ms || settled || requested
 }
 
 /// Ends the run and prints the status line.
@@ -754,8 +775,8 @@ fn monitor(
             let l = live.lock().unwrap_or_else(|e| e.into_inner());
             (l.released_ms, l.phase.clone(), l.centres)
         };
-        let ended = dropped.or(released).is_some_and(|t| now > t + AFTER_END_MS);
-        if now >= duration_ms || ended || options.stop.load(Ordering::Relaxed) {
+        let requested = options.stop.load(Ordering::Relaxed);
+        if run_is_over(now, duration_ms, dropped, released, requested) {
             stop.store(true, Ordering::Relaxed);
         }
         if options.status && last_status.elapsed() >= STATUS_PERIOD {

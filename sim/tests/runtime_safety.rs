@@ -272,3 +272,22 @@ fn a_sensor_reading_low_is_caught_by_the_firmwares_pump_limits() {
         r.mcu_at_end
     );
 }
+
+#[test]
+fn a_stop_request_ends_a_run_on_the_virtual_clock() {
+    // Ctrl-C sets the caller's stop flag; here it is set from the start.
+    let scenario = Scenario::load("grasp-hold").expect("preset");
+    let options = SimOptions {
+        speed: Pace::Max,
+        ..SimOptions::default()
+    };
+    options
+        .stop
+        .store(true, std::sync::atomic::Ordering::Relaxed);
+    let r = run_scenario(&scenario, &options).expect("simulated rig");
+    assert!(r.loop_result.is_ok(), "{:?}", r.loop_result);
+    // It stops at the first tick after the setup, not at the scenario's 18 s.
+    assert!(r.sim_s < 0.5, "ran {} s", r.sim_s);
+    assert_eq!(r.mcu_at_end.state, ArmState::Disarmed);
+    assert_sealed(&r);
+}
