@@ -414,7 +414,10 @@ impl McuCore {
 
     /// A board reset: outputs safe, disarmed, the firmware's clock from 0.
     fn reset(&mut self) {
+        // A faulty sensor (an injected reading offset) stays faulty.
+        let offset_pa = self.hw.reading_offset_pa;
         self.hw = new_hw(&self.config);
+        self.hw.reading_offset_pa = offset_pa;
         self.controller = new_controller(&self.config, &self.page, ResetCause::Software);
     }
 
@@ -670,6 +673,7 @@ impl VirtualState {
                 core.reset();
                 false
             }
+            // Never queued: `VirtualMcu::inject` keeps a stall apart.
             McuInjection::StallAt { .. } => false,
             McuInjection::ReadingOffsetAt { at_ms, offset_pa } if at_ms <= t_ms => {
                 core.hw.reading_offset_pa = offset_pa;
@@ -677,8 +681,6 @@ impl VirtualState {
             }
             _ => true,
         });
-        // A reset restores the sensors' state, not the offset: a faulty
-        // sensor stays faulty.
     }
 
     fn deliver_to_mcu(&mut self, t_us: u64) {
