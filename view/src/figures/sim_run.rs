@@ -340,6 +340,13 @@ where
     Ok(chart)
 }
 
+/// A time axis label, s: to the ms, without trailing zeros (`12`, `0.05`):
+/// a run shorter than a second still gets distinct labels.
+fn seconds_label(t: &f64) -> String {
+    let ms = (t * 1e3).round() / 1e3;
+    format!("{}", ms + 0.0)
+}
+
 /// Draws the mesh with numbered axes: time in s (bottom panel), `y_desc`.
 fn mesh<DB, Y>(
     chart: &mut TimeChart<'_, DB, Y>,
@@ -356,7 +363,7 @@ where
         .x_labels(16)
         .y_labels(6)
         .y_label_formatter(y_format)
-        .x_label_formatter(&|t| format!("{t:.0}"))
+        .x_label_formatter(&seconds_label)
         .max_light_lines(2)
         .draw()?;
     Ok(())
@@ -630,7 +637,7 @@ fn valve_panel<DB: DrawingBackend>(
         .y_desc("valves")
         .x_labels(16)
         .y_labels(n)
-        .x_label_formatter(&|t| format!("{t:.0}"))
+        .x_label_formatter(&seconds_label)
         .y_label_formatter(&lane_name)
         .draw()?;
     for (k, &chamber) in lanes.iter().enumerate() {
