@@ -6,8 +6,9 @@
 //! Like Bristol's `vsp` tunes its blob detector to the known pin count, the
 //! search runs the calibration's detector ([`markers::auto_detector`], then
 //! [`markers::detect`]) on the rest frame for each strength threshold
-//! (`markers.strength_ratio`, 0.05..=0.95 in steps of 0.05) and counts the
-//! markers: first at the configured scale (automatic unless
+//! (`markers.strength_ratio`, 0.05..=0.95 in steps of 0.05, stopping at
+//! the first that finds fewer than the pin count) and counts the markers:
+//! first at the configured scale (automatic unless
 //! `markers.lobe_px` is set), then at each explicit scale (odd lobes
 //! 3..=15). Per scale it takes the middle of the longest run of thresholds
 //! that find exactly the pin count (the setting furthest from finding one
@@ -162,12 +163,7 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
                 min_contrast: contrast,
                 ..base.markers.clone()
             };
-            let counts: Vec<(f32, usize)> = TUNE_RATIO_STEPS
-                .map(|s| {
-                    let ratio = s as f32 * RATIO_STEP;
-                    (ratio, count_markers(rest, &params_for(ratio)))
-                })
-                .collect();
+            let counts = sweep(|ratio| count_markers(rest, &params_for(ratio)), pins);
             tried += counts.len();
             let candidate = pick(&counts, pins).map(|(ratio, found, range)| TuneResult {
                 markers: params_for(ratio),
@@ -197,6 +193,24 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
 
 /// Step of the strength threshold sweep.
 const RATIO_STEP: f32 = 0.05;
+
+/// Counts at rising strength thresholds (`count_at(ratio)`), until the count
+/// falls below `pins`: a higher threshold keeps a subset of the markers, so
+/// the thresholds after that one only find fewer and are further from the
+/// count. A pin count no setting reaches costs one detection per scale
+/// instead of the whole sweep.
+fn sweep(mut count_at: impl FnMut(f32) -> usize, pins: usize) -> Vec<(f32, usize)> {
+    let mut counts = Vec::new();
+    for s in TUNE_RATIO_STEPS {
+        let ratio = s as f32 * RATIO_STEP;
+        let n = count_at(ratio);
+        counts.push((ratio, n));
+        if n < pins {
+            break;
+        }
+    }
+    counts
+}
 
 /// Exact, with at least one threshold step to spare on each side.
 fn has_margin(r: &TuneResult) -> bool {
@@ -710,7 +724,27 @@ mod tests {
         let r = tune(&rest.image, pins, &base).unwrap();
         assert!(r.exact);
         assert_eq!(r.markers.lobe_px, None, "the automatic scale was replaced");
-        assert_eq!(r.tried, TUNE_RATIO_STEPS.count());
+        assert!(r.tried <= TUNE_RATIO_STEPS.count(), "{r:?}");
+    }
+
+    #[test]
+    fn the_sweep_stops_at_the_first_count_below_the_pins() {
+        // Counts falling with the threshold: 120 at 0.05, 10 fewer per step.
+        let mut asked = 0;
+        let counts = sweep(
+            |ratio| {
+                asked += 1;
+                120 - (10.0 * (ratio / RATIO_STEP - 1.0)).round() as usize
+            },
+            95,
+        );
+        let found: Vec<usize> = counts.iter().map(|c| c.1).collect();
+        assert_eq!(found, [120, 110, 100, 90]);
+        assert_eq!(asked, 4);
+        // A count no threshold reaches: one detection.
+        assert_eq!(sweep(|_| 50, 5000), [(RATIO_STEP, 50)]);
+        // A count every threshold reaches: the whole sweep.
+        assert_eq!(sweep(|_| 50, 10).len(), TUNE_RATIO_STEPS.count());
     }
 
     #[test]

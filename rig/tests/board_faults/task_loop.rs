@@ -7,13 +7,12 @@
 //! The sensors are idle sources (no frame until halted): every step here is
 //! driven by the board's answers, none by a frame's timing.
 
-mod fake_board;
-
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
 
+use crate::fake_board::{answer, matching_hello, FakeBoard, HostLog, Outbox};
 use dexitac_protocol::{
     Fault, FaultEvent, HelloReply, HostMsg, McuMsg, NackReason, CHAMBER_COUNT,
     POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
@@ -26,7 +25,6 @@ use dexitac_tactile::calibrate::{self, Calibration};
 use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::synth::{rest_frame, Category};
-use fake_board::{answer, matching_hello, FakeBoard, HostLog, Outbox};
 
 /// A sensor that delivers no frame and ends when halted.
 struct Idle(Arc<AtomicBool>);

@@ -4,13 +4,11 @@
 //! limits, another chamber count or another protocol version is refused at
 //! hello with a message naming both sides' numbers.
 
-mod fake_board;
-
+use crate::fake_board::{answer, matching_hello, FakeBoard};
 use dexitac_protocol::{
     HostMsg, McuMsg, CHAMBER_COUNT, NEGATIVE_TANK_MIN_PA, POSITIVE_TANK_MAX_PA, PROTOCOL_VERSION,
 };
 use dexitac_rig::link::{Link, LinkConfig, LinkError};
-use fake_board::{answer, matching_hello, FakeBoard};
 
 /// Short ack timeouts: a lost ack costs 20 ms, not 100.
 fn config() -> LinkConfig {
@@ -22,7 +20,7 @@ fn config() -> LinkConfig {
 }
 
 /// The sequence numbers of every `msg` frame the host sent.
-fn seqs_of(log: &fake_board::HostLog, msg: HostMsg) -> Vec<u16> {
+fn seqs_of(log: &crate::fake_board::HostLog, msg: HostMsg) -> Vec<u16> {
     log.frames()
         .iter()
         .filter(|f| f.msg == msg)
