@@ -82,6 +82,7 @@ fn stages(c: &mut Criterion) {
                 black_box(region),
                 &cal.rest_markers,
                 &field,
+                &cal.surface,
                 cal.pitch_px,
                 &params.contact,
                 0.1,

@@ -86,6 +86,7 @@ fn main() {
                             None,
                             &cal.rest_markers,
                             &field,
+                            &cal.surface,
                             cal.pitch_px,
                             &params.contact,
                             cal.density.mm_per_px,

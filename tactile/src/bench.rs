@@ -449,8 +449,13 @@ pub fn conditions_markdown(
 
 /// The condition categories' table ([`conditions_markdown`]) for each
 /// setting of [`settings`] whose name is in `names` (all when empty), at
-/// 640x480 with `frames` frames per category.
-pub fn conditions_report(names: &[&str], frames: usize, seed: u64) -> String {
+/// 640x480 with `frames` frames per category of `categories`.
+pub fn conditions_report(
+    names: &[&str],
+    categories: &[Category],
+    frames: usize,
+    seed: u64,
+) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
@@ -462,7 +467,7 @@ pub fn conditions_report(names: &[&str], frames: usize, seed: u64) -> String {
         }
         let mut sums = Vec::new();
         let mut failed = Vec::new();
-        for (cat, r) in evaluate_each(&setting, &Category::CONDITIONS, frames, 640, 480, seed) {
+        for (cat, r) in evaluate_each(&setting, categories, frames, 640, 480, seed) {
             match r {
                 Ok(samples) => sums.push(summarize(cat, &samples)),
                 Err(e) => failed.push((cat, e.to_string())),
@@ -480,7 +485,7 @@ mod tests {
     /// Prints the condition categories' table for the default setting
     /// (`cargo test --release -p dexitac-tactile --features synth --lib
     /// conditions_report -- --ignored --nocapture`; env `DEXITAC_FRAMES`,
-    /// `DEXITAC_SEED`, `DEXITAC_SETTINGS=all`).
+    /// `DEXITAC_SEED`, `DEXITAC_SETTINGS=all`, `DEXITAC_CATEGORIES=dome,tactip`).
     #[test]
     #[ignore = "a benchmark run, minutes in debug"]
     fn conditions_report_of_the_default_setting() {
@@ -495,7 +500,14 @@ mod tests {
             Some("all") => vec![],
             _ => vec!["default: fast s8, relative, skip+ROI, tracking"],
         };
-        println!("{}", conditions_report(&names, frames, seed));
+        let categories: Vec<Category> = match env("DEXITAC_CATEGORIES") {
+            Some(list) => list
+                .split(',')
+                .map(|n| Category::from_name(n.trim()).unwrap_or_else(|| panic!("no category {n}")))
+                .collect(),
+            None => Category::CONDITIONS.to_vec(),
+        };
+        println!("{}", conditions_report(&names, &categories, frames, seed));
     }
 
     #[test]

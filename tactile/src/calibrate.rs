@@ -14,6 +14,7 @@ use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Detector, MarkerError};
 use crate::params::Params;
+use crate::surface::Surface;
 use crate::tracking::PointIndex;
 use crate::PointPx;
 
@@ -64,6 +65,9 @@ pub struct Calibration {
     pub rest_density: DensityMap,
     /// Sensing-area mask on the same grid (row-major).
     pub mask: Vec<bool>,
+    /// The skin's shape (working px): the tracked contact centre is found
+    /// in its chart.
+    pub surface: Surface,
 }
 
 impl Calibration {
@@ -90,7 +94,41 @@ pub fn calibrate_mapped(
     let given = SensingArea::from_spec(&params.area, params.area_mask.as_ref(), w, h, map)?;
     let mut detector = markers::auto_detector(first, &params.markers)?;
     detector.area = given.clone();
-    let mut sums: Vec<(PointPx, usize)> = markers::detect(first, &detector)
+    let cal = finish(
+        w,
+        h,
+        detector.clone(),
+        stable_markers(rest, &detector),
+        given.clone(),
+        params,
+        map,
+    )?;
+    // On a dome, detect again with the strength threshold eased by the
+    // foreshortening: the thin ellipses of the outer rings were too weak
+    // for the flat threshold.
+    if cal.surface == Surface::Flat {
+        return Ok(cal);
+    }
+    detector.surface = cal.surface;
+    finish(
+        w,
+        h,
+        detector.clone(),
+        stable_markers(rest, &detector),
+        given,
+        params,
+        map,
+    )
+}
+
+/// Markers of `rest[0]` of typical size found in every rest frame, at
+/// their mean position.
+fn stable_markers(rest: &[GreyFrame], detector: &Detector) -> Vec<PointPx> {
+    let Some(first) = rest.first() else {
+        return Vec::new();
+    };
+    let (w, h) = (first.width(), first.height());
+    let mut sums: Vec<(PointPx, usize)> = markers::detect(first, detector)
         .typical_positions()
         .into_iter()
         .map(|p| (p, 1))
@@ -98,7 +136,7 @@ pub fn calibrate_mapped(
     let anchor: Vec<PointPx> = sums.iter().map(|s| s.0).collect();
     let match_px = (2.0 * detector.radius_px).max(2.0);
     for frame in &rest[1..] {
-        let found = markers::detect(frame, &detector).positions();
+        let found = markers::detect(frame, detector).positions();
         let index = PointIndex::new(&found, w, h, match_px);
         for (s, a) in sums.iter_mut().zip(&anchor) {
             if let Some((k, _)) = index.nearest(&found, *a, match_px) {
@@ -107,12 +145,10 @@ pub fn calibrate_mapped(
             }
         }
     }
-    let stable: Vec<PointPx> = sums
-        .into_iter()
+    sums.into_iter()
         .filter(|s| s.1 == rest.len())
         .map(|(p, n)| PointPx::new(p.x / n as f64, p.y / n as f64))
-        .collect();
-    finish(w, h, detector, stable, given, params)
+        .collect()
 }
 
 /// The first frame and the size all frames share.
@@ -218,7 +254,7 @@ pub fn calibrate_from_frames(
             PointPx::new(x, y)
         })
         .collect();
-    finish(w, h, detector, stable, given, params)
+    finish(w, h, detector, stable, given, params, map)
 }
 
 /// Pixel-wise median of same-size frames (the lower median for an even
@@ -248,6 +284,7 @@ fn finish(
     stable: Vec<PointPx>,
     given: Option<SensingArea>,
     params: &Params,
+    map: WorkToInput,
 ) -> Result<Calibration, CalibrationError> {
     if stable.len() < MIN_REST_MARKERS {
         return Err(CalibrationError::TooFewMarkers {
@@ -266,6 +303,8 @@ fn finish(
         });
     }
     let pitch_px = median_spacing(&rest_markers);
+    let surface = params.surface.resolve(&rest_markers, map);
+    detector.surface = surface;
     detector.cell_px = ((pitch_px / detector.bin as f64).round() as usize).max(4);
     detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
     detector.area = Some(area);
@@ -296,6 +335,7 @@ fn finish(
         density,
         rest_density,
         mask,
+        surface,
     })
 }
 

@@ -11,8 +11,8 @@
 //! `min_area_mm2` are not contacts.
 //!
 //! With [`CentreMethod::Hybrid`] the centre comes from the tracked markers
-//! around the region ([`crate::tracking::radial_centre`]) when that fit is
-//! consistent, and contacts too small to dent the density (width below ~h)
+//! around the region ([`crate::tracking::radial_centre_on`], in the chart of
+//! a domed skin, [`crate::surface`]) when that fit is consistent, and contacts too small to dent the density (width below ~h)
 //! are found from the tracked markers alone.
 //!
 //! ```
@@ -34,6 +34,7 @@
 
 use crate::density::DensityMap;
 use crate::params::{CentreMethod, ContactParams, ThresholdMode};
+use crate::surface::Surface;
 use crate::tracking::{self, Field};
 use crate::PointPx;
 
@@ -298,6 +299,7 @@ pub fn locate(
     region: Option<Region>,
     rest: &[PointPx],
     field: &Field,
+    surface: &Surface,
     pitch_px: f64,
     params: &ContactParams,
     mm_per_px: f64,
@@ -313,7 +315,7 @@ pub fn locate(
             let radius_px = (r.area_mm2 / std::f64::consts::PI).sqrt() / mm_per_px;
             let reach = radius_px + 2.0 * pitch_px;
             let near = near_markers(rest, field, r.centre, reach);
-            match tracking::radial_centre(rest, field, &near, field.moved_px) {
+            match tracking::radial_centre_on(surface, rest, field, &near, field.moved_px, 0.0) {
                 Some(fit)
                     if fit.n_inliers >= params.min_moved_markers
                         && fit.inlier_share >= MIN_INLIER_SHARE
@@ -329,7 +331,9 @@ pub fn locate(
                 _ => Some(from_region(r)),
             }
         }
-        (CentreMethod::Hybrid, None) => small_contact(rest, field, pitch_px, params, mm_per_px),
+        (CentreMethod::Hybrid, None) => {
+            small_contact(rest, field, surface, pitch_px, params, mm_per_px)
+        }
     }
 }
 
@@ -393,6 +397,7 @@ pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
 fn small_contact(
     rest: &[PointPx],
     field: &Field,
+    surface: &Surface,
     pitch_px: f64,
     params: &ContactParams,
     mm_per_px: f64,
@@ -422,7 +427,7 @@ fn small_contact(
         .filter(|&(n, &p)| dist(p, centre) <= reach && magnitude(n).is_some_and(|m| m > support_px))
         .map(|(n, _)| n)
         .collect();
-    let fit = tracking::radial_centre_noisy(rest, field, &near, support_px, field.jitter_px)?;
+    let fit = tracking::radial_centre_on(surface, rest, field, &near, support_px, field.jitter_px)?;
     let mut d: Vec<f64> = near
         .iter()
         .filter(|&&n| magnitude(n).is_some_and(|m| m > field.moved_px))
@@ -562,7 +567,16 @@ mod tests {
         nan.displacement[3] = Some(PointPx::new(f64::NAN, 0.0));
         nan.moved.push(3);
         assert!(worth_a_look(&nan, 15.0));
-        assert!(locate(None, &rest, &nan, 15.0, &ContactParams::default(), 0.1).is_none());
+        assert!(locate(
+            None,
+            &rest,
+            &nan,
+            &Surface::Flat,
+            15.0,
+            &ContactParams::default(),
+            0.1
+        )
+        .is_none());
     }
 
     proptest::proptest! {
@@ -593,7 +607,7 @@ mod tests {
                 &rest, &cur, 320, 320, 7.5, params.move_noise_px, params.move_noise_sigmas,
             );
             proptest::prop_assert!(!worth_a_look(&field, 15.0), "{:?}", field.moved_px);
-            proptest::prop_assert!(locate(None, &rest, &field, 15.0, &params, 0.1).is_none());
+            proptest::prop_assert!(locate(None, &rest, &field, &Surface::Flat, 15.0, &params, 0.1).is_none());
         }
     }
 }

@@ -5,8 +5,9 @@
 //! blobs) -> [`density`] (kernel density, Eq. 1) -> [`contact`] (region and
 //! centre, Eq. 2) -> [`displacement`] (Eq. 3). [`calibrate`] builds the rest
 //! reference (from rest frames, or estimated from the frames themselves),
-//! [`area`] is the sensing area detections are kept in, [`tracking`] adds
-//! marker tracking beyond the paper, and
+//! [`area`] is the sensing area detections are kept in, [`surface`] the
+//! skin's shape (flat or a dome), [`tracking`] adds marker tracking beyond
+//! the paper, and
 //! [`pipeline`] runs the stages on one frame with per-stage times.
 //! [`params`] holds the tunables and their TOML form, [`sensor_setup`] tunes
 //! a detector to a skin's pin count and checks a skin's health.
@@ -27,6 +28,7 @@ pub mod markers;
 pub mod params;
 pub mod pipeline;
 pub mod sensor_setup;
+pub mod surface;
 #[cfg(feature = "synth")]
 pub mod synth;
 pub mod tracking;

@@ -33,6 +33,7 @@
 use crate::area::SensingArea;
 use crate::frame::GreyFrame;
 use crate::params::{MarkerParams, Polarity};
+use crate::surface::Surface;
 use crate::PointPx;
 
 /// Candidate full-resolution lobes for the automatic scale search.
@@ -156,6 +157,11 @@ pub struct Detector {
     /// Dark markers on a bright skin (GelSight-type dots): the frame is
     /// inverted before detection.
     pub dark: bool,
+    /// The skin's shape: on a dome, the strength threshold of a candidate
+    /// is scaled by the foreshortening `cos(theta)` where it lies (the outer
+    /// rings' thin ellipses give a weaker blob response). The calibration
+    /// sets it.
+    pub surface: Surface,
 }
 
 /// A local range below this fraction of the frame's typical (75th
@@ -209,10 +215,10 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
         let (lo, range) = env.at(x, y);
         let d = determinant_at(&ii, w + 1, x, y, lobe);
         let strength = d.sqrt();
-        if strength < det.min_rel_strength * range {
+        let guess = to_work(x, y);
+        if strength < det.min_rel_strength * range * det.surface.foreshortening(guess) as f32 {
             continue;
         }
-        let guess = to_work(x, y);
         if det.area.as_ref().is_some_and(|a| !a.contains(guess)) {
             continue;
         }
@@ -668,6 +674,7 @@ fn detector_for(
         window_px: None,
         area: None,
         dark: false,
+        surface: Surface::Flat,
     };
     let all = detect(rest, &det);
     let strengths: Vec<f32> = all.list.iter().map(|m| m.rel_strength).collect();
@@ -1001,6 +1008,7 @@ mod tests {
                 window_px: None,
                 area: None,
                 dark: false,
+                surface: Surface::Flat,
             };
             assert!(detect(&frame, &det).is_empty());
             assert!(matches!(

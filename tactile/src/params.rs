@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 
 use crate::area::{AreaSpec, MaskImage};
+use crate::surface::SurfaceSpec;
 
 /// Working frame width (Sec. III-B: "grayscale images of dimension 640x480").
 pub const WORK_WIDTH_PX: u32 = 640;
@@ -101,6 +102,8 @@ pub struct Params {
     pub contact: ContactParams,
     /// The sensing area (`[area]`, input px); automatic by default.
     pub area: AreaSpec,
+    /// The skin's shape (`[surface]`, input px); estimated by default.
+    pub surface: SurfaceSpec,
     /// The decoded mask image of an `[area] shape = "mask"` config, filled
     /// by whoever reads the config file (this crate reads no images).
     #[serde(skip)]
@@ -414,6 +417,9 @@ impl Params {
             c.min_moved_markers >= 1,
             "must be >= 1",
         )?;
+        if let Some(reason) = self.surface.problem() {
+            check("surface", "dome", false, reason)?;
+        }
         Ok(())
     }
 }

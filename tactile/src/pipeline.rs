@@ -176,6 +176,7 @@ impl Pipeline {
                 region,
                 &cal.rest_markers,
                 &field,
+                &cal.surface,
                 cal.pitch_px,
                 cp,
                 cal.density.mm_per_px,

@@ -25,6 +25,7 @@
 //! residual; [`radial_centre_noisy`] lets weak displacements take part with
 //! a tolerance that follows their direction uncertainty.
 
+use crate::surface::Surface;
 use crate::PointPx;
 
 /// A displacement line passing within this distance of the fitted centre is
@@ -270,13 +271,42 @@ pub fn radial_centre_noisy(
     noise_px: f64,
     jitter_px: f64,
 ) -> Option<RadialFit> {
+    radial_centre_on(&Surface::Flat, rest, field, selected, noise_px, jitter_px)
+}
+
+/// [`radial_centre_noisy`] on a skin of shape `surface`: each displacement
+/// line runs from the rest marker's chart point towards its displaced
+/// position's chart point ([`Surface::to_chart`], where a dome's great
+/// circles are straight), with its weight and noise test on the image
+/// displacement; the centre is met in the chart and mapped back to the
+/// image. The residual is in chart px.
+pub fn radial_centre_on(
+    surface: &Surface,
+    rest: &[PointPx],
+    field: &Field,
+    selected: &[usize],
+    noise_px: f64,
+    jitter_px: f64,
+) -> Option<RadialFit> {
     let lines: Vec<(PointPx, PointPx, f64)> = selected
         .iter()
         .filter_map(|&n| {
             let u = (*field.displacement.get(n)?)?;
             let len = u.x.hypot(u.y);
-            (len > noise_px && len.is_finite())
-                .then(|| (rest[n], PointPx::new(u.x / len, u.y / len), len * len))
+            if !(len > noise_px && len.is_finite()) {
+                return None;
+            }
+            let p = *rest.get(n)?;
+            let (a, (dx, dy)) = match surface {
+                Surface::Flat => (p, (u.x, u.y)),
+                Surface::Dome(_) => {
+                    let a = surface.to_chart(p);
+                    let b = surface.to_chart(PointPx::new(p.x + u.x, p.y + u.y));
+                    (a, (b.x - a.x, b.y - a.y))
+                }
+            };
+            let d = dx.hypot(dy);
+            (d > 0.0 && d.is_finite()).then(|| (a, PointPx::new(dx / d, dy / d), len * len))
         })
         .collect();
     let jitter_px = if jitter_px.is_finite() {
@@ -333,7 +363,7 @@ pub fn radial_centre_noisy(
         }
     }
     let fit = RadialFit {
-        centre: c,
+        centre: surface.from_chart(c),
         residual_px: if si > 0.0 {
             (sr / si).sqrt()
         } else {
@@ -396,6 +426,76 @@ mod tests {
         let fit = radial_centre(&rest, &field, &field.moved, 0.3).unwrap();
         let err = (fit.centre.x - 97.3).hypot(fit.centre.y - 104.6);
         assert!(err < 0.05, "{fit:?}");
+    }
+
+    #[test]
+    fn on_a_dome_the_chart_removes_the_foreshortening_bias() {
+        use crate::surface::{Dome, Surface};
+        let centre = PointPx::new(320.0, 240.0);
+        let dome = crate::synth::Dome {
+            radius_px: 230.0,
+            rim_polar_rad: 65f64.to_radians(),
+        };
+        let surface = Surface::Dome(Dome {
+            centre,
+            radius_px: 230.0,
+        });
+        // A press at polar angle 50 deg: markers within 40 px of arc move
+        // away from it along great circles, by up to 3 px of arc.
+        let c = [
+            50f64.to_radians().sin() * 0.6,
+            50f64.to_radians().sin() * 0.8,
+            50f64.to_radians().cos(),
+        ];
+        let truth = dome.project(centre, crate::synth::DomePoint(c));
+        let rest: Vec<PointPx> = test_fixtures::hex_points(640, 480, 12.0)
+            .into_iter()
+            .filter(|p| (p.x - centre.x).hypot(p.y - centre.y) < dome.rim_radius_px())
+            .collect();
+        let cur: Vec<PointPx> = rest
+            .iter()
+            .map(|&p| {
+                let m = dome.lift(centre, p).0;
+                let g = 230.0
+                    * (m[0] * c[0] + m[1] * c[1] + m[2] * c[2])
+                        .clamp(-1.0, 1.0)
+                        .acos();
+                let axis = [
+                    c[1] * m[2] - c[2] * m[1],
+                    c[2] * m[0] - c[0] * m[2],
+                    c[0] * m[1] - c[1] * m[0],
+                ];
+                let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+                if g > 40.0 || n < 1e-9 {
+                    return p;
+                }
+                let k = [axis[0] / n, axis[1] / n, axis[2] / n];
+                let angle = 3.0 * (-(g * g) / (2.0 * 15.0 * 15.0)).exp() / 230.0;
+                // Rodrigues, about k (from c towards m: away from the press).
+                let (sn, cs) = angle.sin_cos();
+                let kv = [
+                    k[1] * m[2] - k[2] * m[1],
+                    k[2] * m[0] - k[0] * m[2],
+                    k[0] * m[1] - k[1] * m[0],
+                ];
+                let kd = (k[0] * m[0] + k[1] * m[1] + k[2] * m[2]) * (1.0 - cs);
+                let v = [
+                    m[0] * cs + kv[0] * sn + k[0] * kd,
+                    m[1] * cs + kv[1] * sn + k[1] * kd,
+                    m[2] * cs + kv[2] * sn + k[2] * kd,
+                ];
+                dome.project(centre, crate::synth::DomePoint(v))
+            })
+            .collect();
+        let field = track(&rest, &cur, 640, 480, 6.0, 0.05);
+        assert!(field.moved.len() > 10, "{}", field.moved.len());
+        let err = |s: &Surface| {
+            let fit = radial_centre_on(s, &rest, &field, &field.moved, 0.05, 0.0).unwrap();
+            (fit.centre.x - truth.x).hypot(fit.centre.y - truth.y)
+        };
+        let (flat, charted) = (err(&Surface::Flat), err(&surface));
+        assert!(charted < 0.05, "dome chart: {charted} px off");
+        assert!(flat > 10.0 * charted, "flat {flat} px, chart {charted} px");
     }
 
     #[test]

@@ -263,6 +263,7 @@ proptest! {
             window_px: None,
             area: None,
             dark: false,
+            surface: dexitac_tactile::surface::Surface::Flat,
         };
         for m in markers::detect(&p.grey, &det).list {
             prop_assert!(m.pos.is_finite());

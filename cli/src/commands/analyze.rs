@@ -119,6 +119,12 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
         calibrate::calibrate_mapped(&rest_prepared, &params, map)
     }
     .map_err(|e| anyhow!("{e}"))?;
+    tracing::info!(
+        "rest: {} markers, pitch {:.1} px, skin {}",
+        cal.rest_markers.len(),
+        cal.pitch_px,
+        cal.surface.describe(&cal.rest_markers)
+    );
     let pipeline = Pipeline::new(cal, params.clone());
 
     if let Some(dir) = &args.markers_out {

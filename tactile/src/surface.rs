@@ -1,0 +1,500 @@
+//! The shape of the skin the camera looks at: flat, or a dome (TacTip).
+//!
+//! On a dome seen from inside along its axis, a marker at polar angle
+//! `theta` from the apex appears at image radius `R sin(theta)`: towards the
+//! rim the skin is foreshortened by `cos(theta)` along the radius. A press
+//! pushes the markers along the dome, away from the contact along great
+//! circles; in the image those paths are arcs of ellipses whose tangents at
+//! the markers miss the contact's image, towards the rim by pixels. The
+//! tracked contact centre ([`crate::tracking::radial_centre`]) meets the
+//! displacement lines in a plane where they are straight again: the
+//! **gnomonic chart** of the dome (central projection from the sphere's
+//! centre onto the plane touching the apex), which maps every great circle
+//! to a straight line. It is scaled so that at the apex one chart px is one
+//! image px; the centre is found there and mapped back to the image.
+//!
+//! The dome is estimated from the rest markers ([`estimate`]): the skin's
+//! pins sit at a regular pitch along its surface, so the right sphere makes
+//! the distances between radial neighbours *along the surface* most
+//! uniform, while in the image they shrink towards the rim by `cos(theta)`. A flat skin gives no
+//! improvement over the image and stays [`Surface::Flat`]. The camera is
+//! taken as orthographic (the dome's axis through the sensing area's
+//! centre); a strong perspective would need the lens.
+
+use serde::Deserialize;
+
+use crate::area::WorkToInput;
+use crate::PointPx;
+
+/// The skin's shape as given in a sensor config (`[surface]`), in input px.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize, Default)]
+#[serde(tag = "shape", rename_all = "snake_case", deny_unknown_fields)]
+pub enum SurfaceSpec {
+    /// Estimated from the rest markers ([`estimate`], the default).
+    #[default]
+    Auto,
+    /// Flat: the image is the chart.
+    Flat,
+    /// A dome seen from inside along its axis.
+    Dome {
+        /// The apex's image `[x, y]`, input px.
+        centre_px: [f64; 2],
+        /// Sphere radius, input px (the rim's image radius over the sine
+        /// of the rim's polar angle).
+        radius_px: f64,
+    },
+}
+
+impl SurfaceSpec {
+    /// The surface in working px: a given dome mapped through `map` (its
+    /// radius by the mean scale), or estimated from `rest` (working px).
+    pub fn resolve(&self, rest: &[PointPx], map: WorkToInput) -> Surface {
+        match *self {
+            SurfaceSpec::Auto => estimate(rest),
+            SurfaceSpec::Flat => Surface::Flat,
+            SurfaceSpec::Dome {
+                centre_px,
+                radius_px,
+            } => Surface::Dome(Dome {
+                centre: PointPx::new(
+                    (centre_px[0] - map.origin_px.x + 0.5) / map.scale_x - 0.5,
+                    (centre_px[1] - map.origin_px.y + 0.5) / map.scale_y - 0.5,
+                ),
+                radius_px: 2.0 * radius_px / (map.scale_x + map.scale_y),
+            }),
+        }
+    }
+
+    /// Why the spec is unusable, if it is (non-finite or non-positive).
+    pub fn problem(&self) -> Option<&'static str> {
+        match *self {
+            SurfaceSpec::Dome {
+                centre_px,
+                radius_px,
+            } if !(centre_px.iter().all(|v| v.is_finite())
+                && radius_px.is_finite()
+                && radius_px > 0.0) =>
+            {
+                Some("a dome needs a finite centre_px and a finite radius_px > 0")
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The skin's shape, in working px.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Surface {
+    /// A flat skin: the image is the chart.
+    #[default]
+    Flat,
+    /// A dome seen from inside along its axis.
+    Dome(Dome),
+}
+
+/// A spherical dome seen orthographically along its axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Dome {
+    /// The apex's image (the sphere's axis), working px.
+    pub centre: PointPx,
+    /// Sphere radius, working px.
+    pub radius_px: f64,
+}
+
+/// Farthest polar angle mapped to the chart, rad (the gnomonic scale grows
+/// as `1 / cos^2`: 11x at 72.5 deg). Points beyond are clamped to it.
+pub const MAX_POLAR_RAD: f64 = 1.265;
+
+impl Surface {
+    /// The chart point of image point `p` (itself on a flat skin).
+    pub fn to_chart(&self, p: PointPx) -> PointPx {
+        match self {
+            Surface::Flat => p,
+            Surface::Dome(d) => d.to_chart(p),
+        }
+    }
+
+    /// The image point of chart point `q` (itself on a flat skin).
+    pub fn from_chart(&self, q: PointPx) -> PointPx {
+        match self {
+            Surface::Flat => q,
+            Surface::Dome(d) => d.from_chart(q),
+        }
+    }
+
+    /// Foreshortening `cos(theta)` at image point `p`: 1 on a flat skin, and
+    /// at least `cos(MAX_POLAR_RAD)` on a dome.
+    pub fn foreshortening(&self, p: PointPx) -> f64 {
+        match self {
+            Surface::Flat => 1.0,
+            Surface::Dome(d) => d.lift(p)[2],
+        }
+    }
+
+    /// Short description for reports: `flat`, or the dome's radius and the
+    /// polar angle of the farthest of the `rest` markers.
+    pub fn describe(&self, rest: &[PointPx]) -> String {
+        match self {
+            Surface::Flat => "flat".into(),
+            Surface::Dome(d) => {
+                let rim_px = rest
+                    .iter()
+                    .map(|p| (p.x - d.centre.x).hypot(p.y - d.centre.y))
+                    .filter(|r| r.is_finite())
+                    .fold(0.0, f64::max);
+                format!(
+                    "dome (radius {:.0} px, markers out to {:.0} deg from the apex)",
+                    d.radius_px,
+                    (rim_px / d.radius_px).clamp(0.0, 1.0).asin().to_degrees()
+                )
+            }
+        }
+    }
+}
+
+impl Dome {
+    /// Unit-sphere coordinates `(x, y, z)` of the dome point seen at `p`,
+    /// with the polar angle clamped to [`MAX_POLAR_RAD`].
+    fn lift(&self, p: PointPx) -> [f64; 3] {
+        let (x, y) = (
+            (p.x - self.centre.x) / self.radius_px,
+            (p.y - self.centre.y) / self.radius_px,
+        );
+        let r = x.hypot(y);
+        let r_max = MAX_POLAR_RAD.sin();
+        let (x, y) = if r > r_max {
+            (x * r_max / r, y * r_max / r)
+        } else {
+            (x, y)
+        };
+        [x, y, (1.0 - x * x - y * y).max(0.0).sqrt()]
+    }
+
+    /// Gnomonic chart point of image point `p`, px (scale 1 at the apex).
+    pub fn to_chart(&self, p: PointPx) -> PointPx {
+        let [x, y, z] = self.lift(p);
+        PointPx::new(
+            self.centre.x + self.radius_px * x / z,
+            self.centre.y + self.radius_px * y / z,
+        )
+    }
+
+    /// Image point of gnomonic chart point `q`.
+    pub fn from_chart(&self, q: PointPx) -> PointPx {
+        let (a, b) = (
+            (q.x - self.centre.x) / self.radius_px,
+            (q.y - self.centre.y) / self.radius_px,
+        );
+        let n = (1.0 + a * a + b * b).sqrt();
+        PointPx::new(
+            self.centre.x + self.radius_px * a / n,
+            self.centre.y + self.radius_px * b / n,
+        )
+    }
+
+    /// Distance along the dome between the points seen at `p` and `q`, px.
+    pub fn arc_px(&self, p: PointPx, q: PointPx) -> f64 {
+        let (a, b) = (self.lift(p), self.lift(q));
+        let c = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        // acos loses precision for close points: use the chord's angle.
+        let chord = ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+        let angle = if c > 0.9 {
+            2.0 * (0.5 * chord).asin()
+        } else {
+            c.clamp(-1.0, 1.0).acos()
+        };
+        self.radius_px * angle
+    }
+}
+
+/// Rim polar angles tried by [`estimate`], deg (0: flat).
+const RIM_ANGLES_DEG: std::ops::RangeInclusive<u32> = 1..=16;
+/// Step of [`RIM_ANGLES_DEG`], deg.
+const RIM_STEP_DEG: f64 = 5.0;
+/// A dome is taken only when it makes the nearest-neighbour distances along
+/// the skin this much more uniform than in the image (robust spread ratio).
+pub const MIN_UNIFORMITY_GAIN: f64 = 0.8;
+/// ... and its rim lies at least this far from the apex, deg (below, the
+/// foreshortening is under 6 % and a flat chart is as good).
+pub const MIN_RIM_DEG: f64 = 20.0;
+/// Neighbours looked at per marker for its nearest along the surface.
+const NEIGHBOURS: usize = 8;
+
+/// The skin's shape from its rest markers (see the [module docs](self)):
+/// a dome centred on the markers' centroid whose radius makes the
+/// distances between radial neighbours along it most uniform, or
+/// [`Surface::Flat`] when that is no better than the image. Needs at least
+/// 30 markers (fewer: flat).
+pub fn estimate(rest: &[PointPx]) -> Surface {
+    let pts: Vec<PointPx> = rest.iter().copied().filter(|p| p.is_finite()).collect();
+    if pts.len() < 30 {
+        return Surface::Flat;
+    }
+    let n = pts.len() as f64;
+    let centre = PointPx::new(
+        pts.iter().map(|p| p.x).sum::<f64>() / n,
+        pts.iter().map(|p| p.y).sum::<f64>() / n,
+    );
+    let rim_px = pts
+        .iter()
+        .map(|p| (p.x - centre.x).hypot(p.y - centre.y))
+        .fold(0.0, f64::max);
+    if rim_px <= 0.0 {
+        return Surface::Flat;
+    }
+    let neighbours = nearest_neighbours(&pts, NEIGHBOURS);
+    let spread_for = |rim_deg: f64| -> f64 {
+        let dome = Dome {
+            centre,
+            radius_px: rim_px / rim_deg.to_radians().sin(),
+        };
+        spread(&pts, &neighbours, centre, |a, b| dome.arc_px(a, b))
+    };
+    let flat = spread(&pts, &neighbours, centre, |a, b| {
+        (a.x - b.x).hypot(a.y - b.y)
+    });
+    let (mut best_deg, mut best) = (0.0, f64::INFINITY);
+    for k in RIM_ANGLES_DEG {
+        let deg = k as f64 * RIM_STEP_DEG;
+        let s = spread_for(deg);
+        if s < best {
+            (best_deg, best) = (deg, s);
+        }
+    }
+    // Refine within one step either side (golden section).
+    let (mut lo, mut hi) = (
+        (best_deg - RIM_STEP_DEG).max(1.0),
+        (best_deg + RIM_STEP_DEG).min(MAX_POLAR_RAD.to_degrees()),
+    );
+    let g = 0.5 * (5f64.sqrt() - 1.0);
+    for _ in 0..12 {
+        let (a, b) = (hi - g * (hi - lo), lo + g * (hi - lo));
+        if spread_for(a) < spread_for(b) {
+            hi = b;
+        } else {
+            lo = a;
+        }
+    }
+    let deg = 0.5 * (lo + hi);
+    let s = spread_for(deg);
+    if s.is_finite() && s < MIN_UNIFORMITY_GAIN * flat && deg >= MIN_RIM_DEG {
+        Surface::Dome(Dome {
+            centre,
+            radius_px: rim_px / deg.to_radians().sin(),
+        })
+    } else {
+        Surface::Flat
+    }
+}
+
+/// Per point, the indices of its `k` nearest others in the image.
+fn nearest_neighbours(pts: &[PointPx], k: usize) -> Vec<Vec<usize>> {
+    pts.iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let mut d: Vec<(f64, usize)> = pts
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != i)
+                .map(|(j, q)| ((p.x - q.x).powi(2) + (p.y - q.y).powi(2), j))
+                .collect();
+            let k = k.min(d.len());
+            if k == 0 {
+                return Vec::new();
+            }
+            d.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+            d[..k].iter().map(|x| x.1).collect()
+        })
+        .collect()
+}
+
+/// Robust relative spread (interquartile range over median) of each point's
+/// distance, by `dist`, to its nearest image neighbour in the radial
+/// direction (within [`RADIAL_CONE_DEG`] of the line from `centre`). The
+/// radial spacing is what the dome foreshortens; the tangential one also
+/// depends on how the pins are laid out, and would bias the estimate.
+fn spread(
+    pts: &[PointPx],
+    neighbours: &[Vec<usize>],
+    centre: PointPx,
+    dist: impl Fn(PointPx, PointPx) -> f64,
+) -> f64 {
+    let cone = RADIAL_CONE_DEG.to_radians().cos();
+    let mut d: Vec<f64> = pts
+        .iter()
+        .zip(neighbours)
+        .filter_map(|(p, ns)| {
+            let (rx, ry) = (p.x - centre.x, p.y - centre.y);
+            let r = rx.hypot(ry);
+            ns.iter()
+                .filter(|&&j| {
+                    let (qx, qy) = (pts[j].x - p.x, pts[j].y - p.y);
+                    let q = qx.hypot(qy);
+                    // Near the centre every direction is radial enough.
+                    r < 1e-9 || q < 1e-9 || (rx * qx + ry * qy).abs() >= cone * r * q
+                })
+                .map(|&j| dist(*p, pts[j]))
+                .filter(|v| v.is_finite())
+                .min_by(f64::total_cmp)
+        })
+        .collect();
+    if d.len() < 4 {
+        return f64::INFINITY;
+    }
+    d.sort_by(f64::total_cmp);
+    let q = |f: f64| d[((d.len() - 1) as f64 * f).round() as usize];
+    let median = q(0.5);
+    if median <= 0.0 {
+        return f64::INFINITY;
+    }
+    (q(0.75) - q(0.25)) / median
+}
+
+/// Half-angle of the cone around the radial direction that [`spread`] looks
+/// in, deg (a hex lattice always has a neighbour within 30 deg).
+const RADIAL_CONE_DEG: f64 = 30.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hex lattice of pitch `pitch` laid along a dome (arc length from
+    /// the apex = lattice distance) up to polar angle `rim_deg`, projected.
+    fn dome_lattice(dome: &Dome, pitch: f64, rim_deg: f64) -> Vec<PointPx> {
+        let max_arc = dome.radius_px * rim_deg.to_radians();
+        let mut out = Vec::new();
+        let rows = (max_arc / (pitch * 0.866)).ceil() as i64;
+        for j in -rows..=rows {
+            let y = j as f64 * pitch * 0.866;
+            let shift = if j % 2 == 0 { 0.0 } else { 0.5 * pitch };
+            let cols = (max_arc / pitch).ceil() as i64 + 1;
+            for i in -cols..=cols {
+                let x = i as f64 * pitch + shift;
+                let arc = x.hypot(y);
+                if arc > max_arc {
+                    continue;
+                }
+                let polar = arc / dome.radius_px;
+                let s = if arc > 0.0 {
+                    dome.radius_px * polar.sin() / arc
+                } else {
+                    1.0
+                };
+                out.push(PointPx::new(dome.centre.x + x * s, dome.centre.y + y * s));
+            }
+        }
+        out
+    }
+
+    fn flat_lattice(pitch: f64, radius: f64) -> Vec<PointPx> {
+        let dome = Dome {
+            centre: PointPx::new(320.0, 240.0),
+            radius_px: 1e9,
+        };
+        dome_lattice(&dome, pitch, (radius / 1e9).to_degrees())
+    }
+
+    #[test]
+    fn chart_round_trips_and_is_the_image_near_the_apex() {
+        let d = Dome {
+            centre: PointPx::new(320.0, 240.0),
+            radius_px: 230.0,
+        };
+        for p in [
+            PointPx::new(320.0, 240.0),
+            PointPx::new(400.0, 200.0),
+            PointPx::new(320.0 + 200.0, 240.0),
+            PointPx::new(170.0, 360.0),
+        ] {
+            let back = d.from_chart(d.to_chart(p));
+            assert!(
+                (back.x - p.x).abs() < 1e-9 && (back.y - p.y).abs() < 1e-9,
+                "{p:?} {back:?}"
+            );
+        }
+        let near = d.to_chart(PointPx::new(321.0, 240.0));
+        assert!((near.x - 321.0).abs() < 1e-4);
+        // Beyond the chart's reach: clamped, finite.
+        assert!(d.to_chart(PointPx::new(1e6, -1e6)).is_finite());
+    }
+
+    #[test]
+    fn great_circles_are_straight_in_the_chart() {
+        // Points along one great circle (rotating a rim point towards another
+        // through the sphere), seen in the image, lie on one chart line.
+        let d = Dome {
+            centre: PointPx::new(0.0, 0.0),
+            radius_px: 100.0,
+        };
+        let (a, b) = ([0.8f64, 0.1, 0.0], [-0.2f64, 0.7, 0.0]);
+        let za = (1.0 - a[0] * a[0] - a[1] * a[1]).sqrt();
+        let zb = (1.0 - b[0] * b[0] - b[1] * b[1]).sqrt();
+        let (a, b) = ([a[0], a[1], za], [b[0], b[1], zb]);
+        let pts: Vec<PointPx> = (0..=10)
+            .map(|k| {
+                let t = k as f64 / 10.0;
+                let v: Vec<f64> = (0..3).map(|i| (1.0 - t) * a[i] + t * b[i]).collect();
+                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                d.to_chart(PointPx::new(100.0 * v[0] / n, 100.0 * v[1] / n))
+            })
+            .collect();
+        let (p0, p1) = (pts[0], pts[10]);
+        let len = (p1.x - p0.x).hypot(p1.y - p0.y);
+        for p in &pts {
+            let off = ((p1.x - p0.x) * (p.y - p0.y) - (p1.y - p0.y) * (p.x - p0.x)) / len;
+            assert!(off.abs() < 1e-9, "{off}");
+        }
+    }
+
+    #[test]
+    fn a_configured_dome_is_mapped_to_working_px() {
+        let map = WorkToInput {
+            scale_x: 2.0,
+            scale_y: 2.0,
+            origin_px: PointPx::new(100.0, 50.0),
+        };
+        let spec = SurfaceSpec::Dome {
+            centre_px: [739.5, 529.5],
+            radius_px: 500.0,
+        };
+        let Surface::Dome(d) = spec.resolve(&[], map) else {
+            panic!("not a dome");
+        };
+        let back = map.apply(d.centre);
+        assert!((back.x - 739.5).abs() < 1e-9 && (back.y - 529.5).abs() < 1e-9);
+        assert_eq!(d.radius_px, 250.0);
+        assert_eq!(SurfaceSpec::Flat.resolve(&[], map), Surface::Flat);
+        assert!(spec.problem().is_none());
+        let bad = SurfaceSpec::Dome {
+            centre_px: [f64::NAN, 1.0],
+            radius_px: 5.0,
+        };
+        assert!(bad.problem().is_some());
+    }
+
+    #[test]
+    fn a_dome_is_found_with_its_radius_and_a_flat_skin_stays_flat() {
+        for rim_deg in [40.0, 65.0] {
+            let truth = Dome {
+                centre: PointPx::new(320.0, 240.0),
+                radius_px: 220.0 / f64::sin(f64::to_radians(rim_deg)),
+            };
+            let pts = dome_lattice(&truth, 14.0, rim_deg);
+            let Surface::Dome(d) = estimate(&pts) else {
+                panic!("rim {rim_deg} deg: taken for flat");
+            };
+            let rel = (d.radius_px - truth.radius_px).abs() / truth.radius_px;
+            assert!(
+                rel < 0.08,
+                "rim {rim_deg}: radius {} vs {}",
+                d.radius_px,
+                truth.radius_px
+            );
+            assert!((d.centre.x - 320.0).abs() < 2.0 && (d.centre.y - 240.0).abs() < 2.0);
+        }
+        assert_eq!(estimate(&flat_lattice(14.0, 220.0)), Surface::Flat);
+        assert_eq!(estimate(&[]), Surface::Flat);
+        let nan = vec![PointPx::new(f64::NAN, 1.0); 50];
+        assert_eq!(estimate(&nan), Surface::Flat);
+    }
+}
