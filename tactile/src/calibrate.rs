@@ -68,6 +68,9 @@ pub struct Calibration {
     /// The skin's shape (working px): the tracked contact centre is found
     /// in its chart.
     pub surface: Surface,
+    /// Per rest marker, the radius of its centroid window when followed
+    /// ([`markers::centroid_radii`]: smaller where a neighbour is close).
+    pub centroid_radii_px: Vec<f64>,
 }
 
 impl Calibration {
@@ -106,19 +109,54 @@ pub fn calibrate_mapped(
     // On a dome, detect again with the strength threshold eased by the
     // foreshortening: the thin ellipses of the outer rings were too weak
     // for the flat threshold.
-    if cal.surface == Surface::Flat {
-        return Ok(cal);
+    let mut cal = if cal.surface == Surface::Flat {
+        cal
+    } else {
+        detector.surface = cal.surface;
+        finish(
+            w,
+            h,
+            detector.clone(),
+            stable_markers(rest, &detector),
+            given,
+            params,
+            map,
+        )?
+    };
+    settle(rest, &mut cal);
+    Ok(cal)
+}
+
+/// Moves each rest marker to where following finds it on the rest frames
+/// (the mean over them; [`markers::follow_all`]), so that a frame without
+/// contact, followed, has its markers where the rest says. The search's
+/// centroid (one window of the detector's radius) and the followed one
+/// (re-centred, in a window that stops short of close neighbours) differ
+/// by up to a pixel on a dome's crowded outer rings and on dense blurred
+/// skins; unsettled, every such marker would look moved in every frame.
+fn settle(rest: &[GreyFrame], cal: &mut Calibration) {
+    let reach_px = crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px;
+    let mut sums: Vec<(f64, f64, usize)> = vec![(0.0, 0.0, 0); cal.rest_markers.len()];
+    for frame in rest {
+        let found = markers::follow_all(
+            frame,
+            &cal.detector,
+            &cal.rest_markers,
+            &cal.centroid_radii_px,
+            reach_px,
+        );
+        for (s, p) in sums.iter_mut().zip(found) {
+            if let Some(p) = p {
+                *s = (s.0 + p.x, s.1 + p.y, s.2 + 1);
+            }
+        }
     }
-    detector.surface = cal.surface;
-    finish(
-        w,
-        h,
-        detector.clone(),
-        stable_markers(rest, &detector),
-        given,
-        params,
-        map,
-    )
+    for (m, s) in cal.rest_markers.iter_mut().zip(sums) {
+        // Followed on every rest frame: settled; otherwise keep the search's.
+        if s.2 == rest.len() {
+            *m = PointPx::new(s.0 / s.2 as f64, s.1 / s.2 as f64);
+        }
+    }
 }
 
 /// Markers of `rest[0]` of typical size found in every rest frame, at
@@ -326,6 +364,7 @@ fn finish(
             *m &= area.contains(p);
         }
     }
+    let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
     Ok(Calibration {
         width: w,
         height: h,
@@ -336,6 +375,7 @@ fn finish(
         rest_density,
         mask,
         surface,
+        centroid_radii_px,
     })
 }
 

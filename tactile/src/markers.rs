@@ -24,6 +24,14 @@
 //! frame by a half-maximum intensity centroid; centroids closer than 2 px
 //! are one marker; centroids outside the sensing area are dropped.
 //!
+//! Frames after the rest are usually not searched at all: [`follow_or_search`]
+//! follows each rest marker in a small window, and searches only the box
+//! around the markers a contact moved too far, hid or merged (the whole
+//! frame only when most are lost). On a dome ([`crate::surface`]) the
+//! strength threshold is eased by the foreshortening, and each marker's
+//! centroid window stops short of its nearest neighbour
+//! ([`centroid_radii`]).
+//!
 //! The scale (lobe, and whether to detect on a 2x2-binned image for speed)
 //! is found from a rest frame by [`auto_detector`]: the lobe whose
 //! scale-normalised strength map peaks highest; the config can override it.
@@ -180,7 +188,11 @@ fn positive(frame: &GreyFrame, dark: bool) -> std::borrow::Cow<'_, GreyFrame> {
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
-    let frame = &*positive(frame, det.dark);
+    detect_positive(&positive(frame, det.dark), det)
+}
+
+/// [`detect`] on a frame already made bright-marker ([`positive`]).
+fn detect_positive(frame: &GreyFrame, det: &Detector) -> Markers {
     let (fw, fh) = (frame.width(), frame.height());
     let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
     let (x1, y1) = (x1.min(fw), y1.min(fh));
@@ -255,7 +267,9 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
 /// Markers found by following known markers instead of searching the
 /// frame: each of `near` (usually the rest markers) is refined by the
 /// half-maximum centroid in a small window around it, re-centred up to
-/// [`FOLLOW_PASSES`] times. `None` (search the whole frame with [`detect`]
+/// [`FOLLOW_PASSES`] times, in a window of its radius in `radii_px`
+/// ([`centroid_radii`]; the detector's for markers past the slice's end).
+/// `None` (search the whole frame with [`detect`]
 /// instead) when more than [`FOLLOW_MAX_LOST`] of them are lost: moved more
 /// than `reach_px`, faded below [`FOLLOW_MIN_CONTRAST`] of the frame's
 /// median marker contrast (or the detector's absolute floor), or merged
@@ -265,70 +279,330 @@ pub fn follow(
     frame: &GreyFrame,
     det: &Detector,
     near: &[PointPx],
+    radii_px: &[f64],
     reach_px: f64,
 ) -> Option<Markers> {
     let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
-    let mut lost = 0usize;
-    let mut found: Vec<(PointPx, f32, f32)> = Vec::with_capacity(near.len());
-    for &p in near {
-        let mut at = p;
-        let mut hit = None;
-        for _ in 0..FOLLOW_PASSES {
-            match refine(frame, at, det.radius_px, det.min_contrast) {
-                Some((c, contrast, area)) => {
-                    let step = (c.x - at.x).hypot(c.y - at.y);
-                    at = c;
-                    hit = Some((contrast, area));
-                    if step < FOLLOW_SETTLED_PX {
-                        break;
-                    }
-                }
-                None => {
-                    hit = None;
-                    break;
-                }
+    let (list, _) = follow_each(frame, det, near, radii_px, reach_px, Limit::lost(max_lost))?;
+    Some(Markers {
+        list: list.into_iter().flatten().collect(),
+    })
+}
+
+/// Where each of `near` is followed to in `frame` ([`follow`], nothing
+/// given up): `None` for the lost ones. The calibration settles the rest
+/// markers with it, so that a followed frame without contact finds them
+/// where the rest says.
+pub fn follow_all(
+    frame: &GreyFrame,
+    det: &Detector,
+    near: &[PointPx],
+    radii_px: &[f64],
+    reach_px: f64,
+) -> Vec<Option<PointPx>> {
+    let frame = &*positive(frame, det.dark);
+    follow_each(
+        frame,
+        det,
+        near,
+        radii_px,
+        reach_px,
+        Limit::lost(usize::MAX),
+    )
+    .map(|(list, _)| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
+    .unwrap_or_else(|| vec![None; near.len()])
+}
+
+/// How [`follow_or_search`] found a frame's markers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Search {
+    /// Every marker was followed in its own window.
+    Followed,
+    /// The markers were followed, and the box `[x0, y0, x1, y1)` (working
+    /// px) around the lost ones was searched.
+    Local([usize; 4]),
+    /// The whole frame was searched.
+    Full,
+}
+
+/// A frame may lose up to this fraction of the followed markers and still
+/// be searched only around them ([`follow_or_search`]); more (a press over
+/// much of the skin, another skin, a blank frame) searches the whole frame.
+pub const LOCAL_SEARCH_MAX_LOST: f64 = 0.25;
+/// Followed markers that moved more than this fraction of the reach are
+/// searched for with the lost ones ([`follow_or_search`]).
+pub const LOCAL_SEARCH_MOVED_REACH: f64 = 0.5;
+/// ... and the window searched around them may cover at most this fraction
+/// of the detector's search window (larger: searching the whole frame costs
+/// little more than following and then searching that window).
+pub const LOCAL_SEARCH_MAX_AREA: f64 = 0.5;
+
+/// The markers of a frame, searched where they can no longer be followed:
+/// `near` are followed as in [`follow`]; when more are lost than it
+/// tolerates (a contact moved, merged or hid them), only the box around the lost ones (their
+/// `near` position, grown by `reach_px` and a marker) is searched with
+/// [`detect`], and its detections replace the followed markers in that box.
+/// Too many lost or too large a box: the whole frame is searched. A contact
+/// frame then costs the following plus a search of the contact's
+/// neighbourhood instead of a pass over every pixel.
+pub fn follow_or_search(
+    frame: &GreyFrame,
+    det: &Detector,
+    near: &[PointPx],
+    radii_px: &[f64],
+    reach_px: f64,
+) -> (Markers, Search) {
+    let frame = &*positive(frame, det.dark);
+    let full = |frame: &GreyFrame| (detect_positive(frame, det), Search::Full);
+    let (fw, fh) = (frame.width(), frame.height());
+    let [wx0, wy0, wx1, wy1] = det.window_px.unwrap_or([0, 0, fw, fh]);
+    let window_area = (wx1.saturating_sub(wx0) * wy1.saturating_sub(wy0)) as f64;
+    let grow = reach_px + 2.0 * det.radius_px;
+    // The detector ignores a margin of its filter at the window's edges and
+    // takes each light-envelope cell's neighbours: the search window is that
+    // much larger than the box, its origin on the whole search's binning and
+    // cell grid, so that inside the box it finds what the whole search finds.
+    let cell = det.cell_px * det.bin;
+    let margin = (3 * (det.lobe_px.max(3) | 1) * det.bin) as f64 / 2.0
+        + det.radius_px
+        + 2.0
+        + 2.0 * cell as f64;
+    let limit = Limit {
+        lost: (LOCAL_SEARCH_MAX_LOST * near.len() as f64).floor() as usize,
+        grow_px: grow + margin,
+        box_area_px: LOCAL_SEARCH_MAX_AREA * window_area,
+    };
+    let Some((followed, lost)) = follow_each(frame, det, near, radii_px, reach_px, limit) else {
+        return full(frame);
+    };
+    // As few lost as `follow` tolerates: the frame is followed.
+    if lost.len() as f64 <= (FOLLOW_MAX_LOST * near.len() as f64).floor() {
+        let list = followed.into_iter().flatten().collect();
+        return (Markers { list }, Search::Followed);
+    }
+    let (mut bx0, mut by0, mut bx1, mut by1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+    // The lost markers, and the followed ones that moved over half the
+    // reach: a window that starts that far off its blob may settle between
+    // it and a squeezed neighbour.
+    let far = followed.iter().enumerate().filter_map(|(k, m)| {
+        let m = m.as_ref()?;
+        let p = near[k];
+        ((m.pos.x - p.x).hypot(m.pos.y - p.y) > LOCAL_SEARCH_MOVED_REACH * reach_px).then_some(k)
+    });
+    for k in lost.iter().copied().chain(far) {
+        let p = near[k];
+        bx0 = bx0.min(p.x - grow);
+        by0 = by0.min(p.y - grow);
+        bx1 = bx1.max(p.x + grow);
+        by1 = by1.max(p.y + grow);
+    }
+    let searched = (bx1 - bx0 + 2.0 * margin) * (by1 - by0 + 2.0 * margin);
+    if !(bx0.is_finite() && by1.is_finite()) || searched > limit.box_area_px {
+        return full(frame);
+    }
+    let clip = |v: f64, lo: usize, hi: usize| (v.max(lo as f64) as usize).min(hi);
+    let snap = |v: usize, origin: usize| origin + (v - origin) / cell * cell;
+    let search = [
+        snap(clip(bx0 - margin, wx0, wx1), wx0),
+        snap(clip(by0 - margin, wy0, wy1), wy0),
+        clip((bx1 + margin).ceil(), wx0, wx1),
+        clip((by1 + margin).ceil(), wy0, wy1),
+    ];
+    let local = Detector {
+        window_px: Some(search),
+        ..det.clone()
+    };
+    let inside = |p: PointPx| p.x >= bx0 && p.x < bx1 && p.y >= by0 && p.y < by1;
+    let mut taken = Occupancy::new(fw, fh);
+    let mut list: Vec<Marker> = Vec::with_capacity(near.len());
+    // Each detection is settled as a followed marker is (same centroid
+    // windows as the settled rest: [`crate::calibrate`]), in the window of
+    // the nearest rest marker.
+    let index = crate::tracking::PointIndex::new(near, fw, fh, 2.0 * reach_px.max(1.0));
+    for mut m in detect_positive(frame, &local).list {
+        if !inside(m.pos) {
+            continue;
+        }
+        let radius_px = index
+            .nearest(near, m.pos, 2.0 * reach_px.max(1.0))
+            .and_then(|(k, _)| radii_px.get(k).copied())
+            .unwrap_or(det.radius_px);
+        if let Some((pos, _, area_px)) = follow_one(frame, m.pos, radius_px, det.min_contrast) {
+            if (pos.x - m.pos.x).hypot(pos.y - m.pos.y) <= reach_px {
+                m.pos = pos;
+                m.area_px = area_px;
             }
         }
-        let kept = hit.filter(|_| {
+        if inside(m.pos) && taken.claim(m.pos, DUPLICATE_PX, &list) {
+            list.push(m);
+        }
+    }
+    for m in followed.into_iter().flatten() {
+        if !inside(m.pos) && taken.claim(m.pos, DUPLICATE_PX, &list) {
+            list.push(m);
+        }
+    }
+    let to_usize = |v: f64| v.max(0.0) as usize;
+    let box_px = [
+        to_usize(bx0),
+        to_usize(by0),
+        to_usize(bx1.ceil()),
+        to_usize(by1.ceil()),
+    ];
+    (Markers { list }, Search::Local(box_px))
+}
+
+/// The half-maximum centroid of the blob at `start`, re-centred until it
+/// settles (at most [`FOLLOW_PASSES`] windows): position, contrast, area.
+fn follow_one(
+    frame: &GreyFrame,
+    start: PointPx,
+    radius_px: f64,
+    min_contrast: f32,
+) -> Option<(PointPx, f32, f32)> {
+    let mut at = start;
+    let mut hit = None;
+    for _ in 0..FOLLOW_PASSES {
+        let (c, contrast, area) = refine(frame, at, radius_px, min_contrast)?;
+        let step = (c.x - at.x).hypot(c.y - at.y);
+        at = c;
+        hit = Some((c, contrast, area));
+        if step < FOLLOW_SETTLED_PX {
+            break;
+        }
+    }
+    hit
+}
+
+/// When [`follow_each`] gives up: more than `lost` markers lost, or the box
+/// around the lost ones, grown by `grow_px` either side, larger than
+/// `box_area_px`.
+#[derive(Debug, Clone, Copy)]
+struct Limit {
+    lost: usize,
+    grow_px: f64,
+    box_area_px: f64,
+}
+
+impl Limit {
+    /// At most `lost` markers lost, anywhere.
+    fn lost(lost: usize) -> Self {
+        Self {
+            lost,
+            grow_px: 0.0,
+            box_area_px: f64::INFINITY,
+        }
+    }
+}
+
+/// Follows each of `near` ([`follow`]; each with its centroid radius from
+/// `radii_px`, or the detector's past its end): per marker, the marker or `None`,
+/// and the indices of the lost ones (moved beyond `reach_px`, faded, or the
+/// second of two that ran into one blob). `None` once `limit` is passed.
+#[allow(clippy::type_complexity)]
+fn follow_each(
+    frame: &GreyFrame,
+    det: &Detector,
+    near: &[PointPx],
+    radii_px: &[f64],
+    reach_px: f64,
+    limit: Limit,
+) -> Option<(Vec<Option<Marker>>, Vec<usize>)> {
+    let max_lost = limit.lost;
+    let mut lost = Vec::new();
+    let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
+    let (mut lo, mut hi) = (
+        PointPx::new(f64::MAX, f64::MAX),
+        PointPx::new(f64::MIN, f64::MIN),
+    );
+    for (k, &p) in near.iter().enumerate() {
+        let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
+        let kept = follow_one(frame, p, radius_px, det.min_contrast).filter(|&(at, _, _)| {
             (at.x - p.x).hypot(at.y - p.y) <= reach_px
                 && det.area.as_ref().is_none_or(|a| a.contains(at))
         });
-        match kept {
-            Some((contrast, area)) => found.push((at, contrast, area)),
-            None => {
-                lost += 1;
-                if lost > max_lost {
-                    return None;
-                }
+        if kept.is_none() {
+            lost.push(k);
+            (lo, hi) = (
+                PointPx::new(lo.x.min(p.x), lo.y.min(p.y)),
+                PointPx::new(hi.x.max(p.x), hi.y.max(p.y)),
+            );
+            let g = 2.0 * limit.grow_px;
+            if lost.len() > max_lost || (hi.x - lo.x + g) * (hi.y - lo.y + g) > limit.box_area_px {
+                return None;
             }
         }
+        found.push(kept);
     }
-    let median = percentile(found.iter().map(|f| f.1).collect(), 0.5);
-    let before = found.len();
-    found.retain(|f| f.1 >= FOLLOW_MIN_CONTRAST * median);
-    lost += before - found.len();
-    if lost > max_lost {
+    let median = percentile(found.iter().flatten().map(|f| f.1).collect(), 0.5);
+    for (k, f) in found.iter_mut().enumerate() {
+        if f.is_some_and(|f| f.1 < FOLLOW_MIN_CONTRAST * median) {
+            *f = None;
+            lost.push(k);
+        }
+    }
+    if lost.len() > max_lost {
         return None;
     }
     let mut taken = Occupancy::new(frame.width(), frame.height());
-    let mut list: Vec<Marker> = Vec::with_capacity(found.len());
-    for (pos, contrast, area_px) in found {
-        if !taken.claim(pos, DUPLICATE_PX, &list) {
-            // Two markers ran into one blob: a contact squeezes them; the
-            // full search sorts that out.
-            return None;
+    let mut claimed: Vec<Marker> = Vec::with_capacity(found.len());
+    let mut out = Vec::with_capacity(found.len());
+    for (k, f) in found.into_iter().enumerate() {
+        let Some((pos, contrast, area_px)) = f else {
+            out.push(None);
+            continue;
+        };
+        if !taken.claim(pos, DUPLICATE_PX, &claimed) {
+            // Two markers ran into one blob: a contact squeezes them; a
+            // search sorts that out.
+            lost.push(k);
+            out.push(None);
+            if lost.len() > max_lost {
+                return None;
+            }
+            continue;
         }
-        list.push(Marker {
+        let m = Marker {
             pos,
             strength: contrast,
             peak: 0,
             rel_level: 1.0,
             rel_strength: contrast / median.max(1.0),
             area_px,
-        });
+        };
+        claimed.push(m);
+        out.push(Some(m));
     }
-    Some(Markers { list })
+    Some((out, lost))
+}
+
+/// The centroid window's radius for each of `points`: `radius_px`, or less
+/// where a neighbour is closer than the window's reach (the outer rings of
+/// a dome, foreshortened to half a pitch): the window (`radius + 2` px
+/// either side) then stops half-way to the nearest neighbour, whose blob
+/// would otherwise pull the centroid, by an amount that changes with the
+/// frame's blur and light.
+pub fn centroid_radii(points: &[PointPx], radius_px: f64) -> Vec<f64> {
+    let reach = radius_px.ceil() + 2.0;
+    let (mut w, mut h) = (1.0f64, 1.0f64);
+    for p in points.iter().filter(|p| p.is_finite()) {
+        w = w.max(p.x + 1.0);
+        h = h.max(p.y + 1.0);
+    }
+    let index = crate::tracking::PointIndex::new(points, w as usize, h as usize, 2.0 * reach);
+    (0..points.len())
+        .map(|n| {
+            let nearest = index
+                .nearest_other(points, n, 2.0 * reach)
+                .map_or(f64::INFINITY, |(_, d)| d);
+            if nearest >= 2.0 * reach {
+                radius_px
+            } else {
+                (0.5 * nearest - 2.0).clamp(1.0, radius_px)
+            }
+        })
+        .collect()
 }
 
 /// Most refinement passes per followed marker.
@@ -336,8 +610,8 @@ pub const FOLLOW_PASSES: usize = 3;
 /// A followed marker whose centroid moved less than this in a pass has
 /// settled, px.
 const FOLLOW_SETTLED_PX: f64 = 0.25;
-/// Fraction of followed markers that may be lost before the frame is
-/// searched in full.
+/// Fraction of followed markers that may be lost (and left out) before
+/// [`follow`] gives up and [`follow_or_search`] searches around them.
 pub const FOLLOW_MAX_LOST: f64 = 0.01;
 /// A followed marker below this fraction of the frame's median marker
 /// contrast is lost (faded, covered).
@@ -991,6 +1265,62 @@ mod tests {
                 rest.markers.len()
             );
         }
+    }
+
+    #[test]
+    fn a_press_is_searched_around_its_lost_markers_only() {
+        use crate::synth::{render, Press, Scene};
+        let sensor = Category::Nominal.sensor(640, 480, 3);
+        let rest = rest_frame(&sensor, 4);
+        let cal = crate::calibrate::calibrate(
+            std::slice::from_ref(&rest.image),
+            &crate::params::Params::default(),
+        )
+        .unwrap();
+        let reach = 0.3 * cal.pitch_px;
+        let (found, search) =
+            follow_or_search(&rest.image, &cal.detector, &cal.rest_markers, &[], reach);
+        assert_eq!(search, Search::Followed);
+        assert_eq!(found.len(), cal.rest_markers.len());
+        // A strong press moves the markers around it beyond the reach.
+        let press = Press {
+            centre: PointPx::new(300.0, 250.0),
+            width_px: 30.0,
+            strength: 1.0,
+            shear_px: PointPx::new(0.0, 0.0),
+        };
+        let pressed = render(&Scene {
+            sensor: sensor.clone(),
+            presses: vec![press],
+            dropout: 0.0,
+            seed: 5,
+        });
+        let (found, search) =
+            follow_or_search(&pressed.image, &cal.detector, &cal.rest_markers, &[], reach);
+        let Search::Local([x0, y0, x1, y1]) = search else {
+            panic!("{search:?}");
+        };
+        assert!(x0 < 300 && 300 < x1 && y0 < 250 && 250 < y1, "{search:?}");
+        assert!((x1 - x0) * (y1 - y0) < 640 * 480 / 4, "{search:?}");
+        // As many markers as the whole-frame search, as close to the truth.
+        let whole = detect(&pressed.image, &cal.detector).positions();
+        let local = found.positions();
+        assert_eq!(local.len(), whole.len());
+        let on_truth = |v: &[PointPx]| {
+            let m = test_fixtures::match_points(v, &pressed.markers, 1.5);
+            let mut e: Vec<f64> = m.iter().map(|x| x.2).collect();
+            e.sort_by(f64::total_cmp);
+            (m.len(), e[e.len() / 2])
+        };
+        let ((n_local, med_local), (n_whole, med_whole)) = (on_truth(&local), on_truth(&whole));
+        assert_eq!(n_local, n_whole);
+        assert!(med_local <= med_whole + 0.02, "{med_local} vs {med_whole}");
+        // A blank frame loses them all: the whole frame is searched.
+        let blank = GreyFrame::new(640, 480, vec![20; 640 * 480]).unwrap();
+        let (found, search) =
+            follow_or_search(&blank, &cal.detector, &cal.rest_markers, &[], reach);
+        assert_eq!(search, Search::Full);
+        assert!(found.is_empty());
     }
 
     #[test]

@@ -3,6 +3,10 @@
 //! times per stage.
 //!
 //! Skipping what a scene doesn't need:
+//! - the markers are followed from their rest places in small windows
+//!   ([`markers::follow_or_search`]); only when a contact loses some of
+//!   them is the box around those searched, and the whole frame only when
+//!   most of the skin is lost;
 //! - a marker *moved* when it is displaced beyond `max(move_noise_px,
 //!   move_noise_sigmas x jitter)`, the jitter measured on the frame itself
 //!   ([`tracking::track_adaptive`]); when no marker moved *strongly*
@@ -23,17 +27,17 @@ use crate::calibrate::Calibration;
 use crate::contact::{self, Contact};
 use crate::density::{self, CellRect};
 use crate::frame::GreyFrame;
-use crate::markers::{self, Markers};
+use crate::markers::{self, Markers, Search};
 use crate::params::{DensityMode, Params};
 use crate::tracking::{self, Field};
 use crate::PointPx;
 
 /// A followed marker further than this many pitches from its rest place is
-/// lost, and the frame searched in full: a marker that moved further (a
+/// lost, and searched for around its place: a marker that moved further (a
 /// shear) could be followed onto its neighbour's blob. Measured on the
 /// shear scenes: 0.5 let such swaps through (centre error p95 13 px
 /// against 3.6 px), 0.3 does not.
-const FOLLOW_REACH_PITCH: f64 = 0.3;
+pub const FOLLOW_REACH_PITCH: f64 = 0.3;
 
 /// Errors of the per-frame pipeline.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
@@ -80,9 +84,10 @@ pub struct FrameResult {
     /// Fewer than half the rest markers were found (blank, covered or
     /// non-tactile frame): reported as no contact.
     pub blank: bool,
-    /// The markers were searched in the whole frame (following the rest
-    /// markers lost some, or following is off).
-    pub full_search: bool,
+    /// How the markers were found: followed from their rest positions,
+    /// followed with a search around the lost ones, or searched in the
+    /// whole frame ([`markers::follow_or_search`]; following off: whole).
+    pub search: Search,
     /// Density grid cells computed.
     pub density_cells: usize,
     /// Stage times.
@@ -120,21 +125,17 @@ impl Pipeline {
         }
         let cp = &self.params.contact;
         let t0 = Instant::now();
-        let followed = self
-            .params
-            .markers
-            .follow
-            .then(|| {
-                markers::follow(
-                    frame,
-                    &cal.detector,
-                    &cal.rest_markers,
-                    FOLLOW_REACH_PITCH * cal.pitch_px,
-                )
-            })
-            .flatten();
-        let full_search = followed.is_none();
-        let markers = followed.unwrap_or_else(|| markers::detect(frame, &cal.detector));
+        let (markers, search) = if self.params.markers.follow {
+            markers::follow_or_search(
+                frame,
+                &cal.detector,
+                &cal.rest_markers,
+                &cal.centroid_radii_px,
+                FOLLOW_REACH_PITCH * cal.pitch_px,
+            )
+        } else {
+            (markers::detect(frame, &cal.detector), Search::Full)
+        };
         let t1 = Instant::now();
         let positions = markers.positions();
         let field = tracking::track_adaptive(
@@ -190,7 +191,7 @@ impl Pipeline {
             contact,
             skipped,
             blank,
-            full_search,
+            search,
             density_cells,
             times: StageTimes {
                 detect_ms: ms(t0, t1),

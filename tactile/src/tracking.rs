@@ -85,6 +85,26 @@ impl PointIndex {
     /// Index and distance of the point nearest to `q` within `radius_px`
     /// (`radius_px` must not exceed the cell size).
     pub fn nearest(&self, points: &[PointPx], q: PointPx, radius_px: f64) -> Option<(usize, f64)> {
+        self.nearest_but(points, q, radius_px, usize::MAX)
+    }
+
+    /// [`PointIndex::nearest`] to point `n` among the others.
+    pub fn nearest_other(
+        &self,
+        points: &[PointPx],
+        n: usize,
+        radius_px: f64,
+    ) -> Option<(usize, f64)> {
+        self.nearest_but(points, *points.get(n)?, radius_px, n)
+    }
+
+    fn nearest_but(
+        &self,
+        points: &[PointPx],
+        q: PointPx,
+        radius_px: f64,
+        skip: usize,
+    ) -> Option<(usize, f64)> {
         if !q.is_finite() {
             return None;
         }
@@ -100,7 +120,7 @@ impl PointIndex {
                 for &n in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
                     let p = points[n as usize];
                     let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
-                    if d2 <= r2 && best.is_none_or(|(_, bd)| d2 < bd) {
+                    if n as usize != skip && d2 <= r2 && best.is_none_or(|(_, bd)| d2 < bd) {
                         best = Some((n as usize, d2));
                     }
                 }
