@@ -24,10 +24,10 @@
 //! frame by a half-maximum intensity centroid; centroids closer than 2 px
 //! are one marker; centroids outside the sensing area are dropped.
 //!
-//! Frames after the rest are usually not searched at all: [`follow_or_search`]
-//! follows each rest marker in a small window, and searches only the box
-//! around the markers a contact moved too far, hid or merged (the whole
-//! frame only when most are lost). On a dome ([`crate::surface`]) the
+//! Frames after the rest are searched only when following fails:
+//! [`follow_or_search`] follows each rest marker in a small window, and
+//! searches the whole frame when a contact moved too many too far, hid or
+//! merged them. On a dome ([`crate::surface`]) the
 //! strength threshold is eased by the foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
 //! ([`centroid_radii`]).
@@ -284,7 +284,7 @@ pub fn follow(
 ) -> Option<Markers> {
     let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
-    let (list, _) = follow_each(frame, det, near, radii_px, reach_px, Limit::lost(max_lost))?;
+    let (list, _) = follow_each(frame, det, near, radii_px, reach_px, max_lost)?;
     Some(Markers {
         list: list.into_iter().flatten().collect(),
     })
@@ -302,50 +302,30 @@ pub fn follow_all(
     reach_px: f64,
 ) -> Vec<Option<PointPx>> {
     let frame = &*positive(frame, det.dark);
-    follow_each(
-        frame,
-        det,
-        near,
-        radii_px,
-        reach_px,
-        Limit::lost(usize::MAX),
-    )
-    .map(|(list, _)| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
-    .unwrap_or_else(|| vec![None; near.len()])
+    follow_each(frame, det, near, radii_px, reach_px, usize::MAX)
+        .map(|(list, _)| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
+        .unwrap_or_else(|| vec![None; near.len()])
 }
 
 /// How [`follow_or_search`] found a frame's markers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Search {
-    /// Every marker was followed in its own window.
+    /// Every marker was followed in its own window (at most
+    /// [`FOLLOW_MAX_LOST`] lost).
     Followed,
-    /// The markers were followed, and the box `[x0, y0, x1, y1)` (working
-    /// px) around the lost ones was searched.
-    Local([usize; 4]),
     /// The whole frame was searched.
     Full,
 }
 
-/// A frame may lose up to this fraction of the followed markers and still
-/// be searched only around them ([`follow_or_search`]); more (a press over
-/// much of the skin, another skin, a blank frame) searches the whole frame.
-pub const LOCAL_SEARCH_MAX_LOST: f64 = 0.25;
-/// Followed markers that moved more than this fraction of the reach are
-/// searched for with the lost ones ([`follow_or_search`]).
-pub const LOCAL_SEARCH_MOVED_REACH: f64 = 0.5;
-/// ... and the window searched around them may cover at most this fraction
-/// of the detector's search window (larger: searching the whole frame costs
-/// little more than following and then searching that window).
-pub const LOCAL_SEARCH_MAX_AREA: f64 = 0.5;
-
-/// The markers of a frame, searched where they can no longer be followed:
-/// `near` are followed as in [`follow`]; when more are lost than it
-/// tolerates (a contact moved, merged or hid them), only the box around the lost ones (their
-/// `near` position, grown by `reach_px` and a marker) is searched with
-/// [`detect`], and its detections replace the followed markers in that box.
-/// Too many lost or too large a box: the whole frame is searched. A contact
-/// frame then costs the following plus a search of the contact's
-/// neighbourhood instead of a pass over every pixel.
+/// The markers of a frame: followed from `near` ([`follow`]), or, when
+/// that loses more than it tolerates (a contact moved, merged or hid
+/// them), searched in the whole frame ([`detect`]).
+///
+/// Searching only the box around the lost markers was tried (commit
+/// 45ed751) and measured slower on 640x480 frames: following every marker
+/// to find the box costs about half a whole search, so large contacts and
+/// scattered dropout took 0.93 and 0.80 ms against 0.66 and 0.59
+/// (BENCHMARKS.md, "Domes, and a search around lost markers").
 pub fn follow_or_search(
     frame: &GreyFrame,
     det: &Detector,
@@ -353,104 +333,10 @@ pub fn follow_or_search(
     radii_px: &[f64],
     reach_px: f64,
 ) -> (Markers, Search) {
-    let frame = &*positive(frame, det.dark);
-    let full = |frame: &GreyFrame| (detect_positive(frame, det), Search::Full);
-    let (fw, fh) = (frame.width(), frame.height());
-    let [wx0, wy0, wx1, wy1] = det.window_px.unwrap_or([0, 0, fw, fh]);
-    let window_area = (wx1.saturating_sub(wx0) * wy1.saturating_sub(wy0)) as f64;
-    let grow = reach_px + 2.0 * det.radius_px;
-    // The detector ignores a margin of its filter at the window's edges and
-    // takes each light-envelope cell's neighbours: the search window is that
-    // much larger than the box, its origin on the whole search's binning and
-    // cell grid, so that inside the box it finds what the whole search finds.
-    let cell = det.cell_px * det.bin;
-    let margin = (3 * (det.lobe_px.max(3) | 1) * det.bin) as f64 / 2.0
-        + det.radius_px
-        + 2.0
-        + 2.0 * cell as f64;
-    let limit = Limit {
-        lost: (LOCAL_SEARCH_MAX_LOST * near.len() as f64).floor() as usize,
-        grow_px: grow + margin,
-        box_area_px: LOCAL_SEARCH_MAX_AREA * window_area,
-    };
-    let Some((followed, lost)) = follow_each(frame, det, near, radii_px, reach_px, limit) else {
-        return full(frame);
-    };
-    // As few lost as `follow` tolerates: the frame is followed.
-    if lost.len() as f64 <= (FOLLOW_MAX_LOST * near.len() as f64).floor() {
-        let list = followed.into_iter().flatten().collect();
-        return (Markers { list }, Search::Followed);
+    match follow(frame, det, near, radii_px, reach_px) {
+        Some(m) => (m, Search::Followed),
+        None => (detect(frame, det), Search::Full),
     }
-    let (mut bx0, mut by0, mut bx1, mut by1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
-    // The lost markers, and the followed ones that moved over half the
-    // reach: a window that starts that far off its blob may settle between
-    // it and a squeezed neighbour.
-    let far = followed.iter().enumerate().filter_map(|(k, m)| {
-        let m = m.as_ref()?;
-        let p = near[k];
-        ((m.pos.x - p.x).hypot(m.pos.y - p.y) > LOCAL_SEARCH_MOVED_REACH * reach_px).then_some(k)
-    });
-    for k in lost.iter().copied().chain(far) {
-        let p = near[k];
-        bx0 = bx0.min(p.x - grow);
-        by0 = by0.min(p.y - grow);
-        bx1 = bx1.max(p.x + grow);
-        by1 = by1.max(p.y + grow);
-    }
-    let searched = (bx1 - bx0 + 2.0 * margin) * (by1 - by0 + 2.0 * margin);
-    if !(bx0.is_finite() && by1.is_finite()) || searched > limit.box_area_px {
-        return full(frame);
-    }
-    let clip = |v: f64, lo: usize, hi: usize| (v.max(lo as f64) as usize).min(hi);
-    let snap = |v: usize, origin: usize| origin + (v - origin) / cell * cell;
-    let search = [
-        snap(clip(bx0 - margin, wx0, wx1), wx0),
-        snap(clip(by0 - margin, wy0, wy1), wy0),
-        clip((bx1 + margin).ceil(), wx0, wx1),
-        clip((by1 + margin).ceil(), wy0, wy1),
-    ];
-    let local = Detector {
-        window_px: Some(search),
-        ..det.clone()
-    };
-    let inside = |p: PointPx| p.x >= bx0 && p.x < bx1 && p.y >= by0 && p.y < by1;
-    let mut taken = Occupancy::new(fw, fh);
-    let mut list: Vec<Marker> = Vec::with_capacity(near.len());
-    // Each detection is settled as a followed marker is (same centroid
-    // windows as the settled rest: [`crate::calibrate`]), in the window of
-    // the nearest rest marker.
-    let index = crate::tracking::PointIndex::new(near, fw, fh, 2.0 * reach_px.max(1.0));
-    for mut m in detect_positive(frame, &local).list {
-        if !inside(m.pos) {
-            continue;
-        }
-        let radius_px = index
-            .nearest(near, m.pos, 2.0 * reach_px.max(1.0))
-            .and_then(|(k, _)| radii_px.get(k).copied())
-            .unwrap_or(det.radius_px);
-        if let Some((pos, _, area_px)) = follow_one(frame, m.pos, radius_px, det.min_contrast) {
-            if (pos.x - m.pos.x).hypot(pos.y - m.pos.y) <= reach_px {
-                m.pos = pos;
-                m.area_px = area_px;
-            }
-        }
-        if inside(m.pos) && taken.claim(m.pos, DUPLICATE_PX, &list) {
-            list.push(m);
-        }
-    }
-    for m in followed.into_iter().flatten() {
-        if !inside(m.pos) && taken.claim(m.pos, DUPLICATE_PX, &list) {
-            list.push(m);
-        }
-    }
-    let to_usize = |v: f64| v.max(0.0) as usize;
-    let box_px = [
-        to_usize(bx0),
-        to_usize(by0),
-        to_usize(bx1.ceil()),
-        to_usize(by1.ceil()),
-    ];
-    (Markers { list }, Search::Local(box_px))
 }
 
 /// The half-maximum centroid of the blob at `start`, re-centred until it
@@ -475,31 +361,11 @@ fn follow_one(
     hit
 }
 
-/// When [`follow_each`] gives up: more than `lost` markers lost, or the box
-/// around the lost ones, grown by `grow_px` either side, larger than
-/// `box_area_px`.
-#[derive(Debug, Clone, Copy)]
-struct Limit {
-    lost: usize,
-    grow_px: f64,
-    box_area_px: f64,
-}
-
-impl Limit {
-    /// At most `lost` markers lost, anywhere.
-    fn lost(lost: usize) -> Self {
-        Self {
-            lost,
-            grow_px: 0.0,
-            box_area_px: f64::INFINITY,
-        }
-    }
-}
-
 /// Follows each of `near` ([`follow`]; each with its centroid radius from
 /// `radii_px`, or the detector's past its end): per marker, the marker or `None`,
 /// and the indices of the lost ones (moved beyond `reach_px`, faded, or the
-/// second of two that ran into one blob). `None` once `limit` is passed.
+/// second of two that ran into one blob). `None` once more than `max_lost`
+/// are lost.
 #[allow(clippy::type_complexity)]
 fn follow_each(
     frame: &GreyFrame,
@@ -507,15 +373,10 @@ fn follow_each(
     near: &[PointPx],
     radii_px: &[f64],
     reach_px: f64,
-    limit: Limit,
+    max_lost: usize,
 ) -> Option<(Vec<Option<Marker>>, Vec<usize>)> {
-    let max_lost = limit.lost;
     let mut lost = Vec::new();
     let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
-    let (mut lo, mut hi) = (
-        PointPx::new(f64::MAX, f64::MAX),
-        PointPx::new(f64::MIN, f64::MIN),
-    );
     for (k, &p) in near.iter().enumerate() {
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
         let kept = follow_one(frame, p, radius_px, det.min_contrast).filter(|&(at, _, _)| {
@@ -524,12 +385,7 @@ fn follow_each(
         });
         if kept.is_none() {
             lost.push(k);
-            (lo, hi) = (
-                PointPx::new(lo.x.min(p.x), lo.y.min(p.y)),
-                PointPx::new(hi.x.max(p.x), hi.y.max(p.y)),
-            );
-            let g = 2.0 * limit.grow_px;
-            if lost.len() > max_lost || (hi.x - lo.x + g) * (hi.y - lo.y + g) > limit.box_area_px {
+            if lost.len() > max_lost {
                 return None;
             }
         }
@@ -611,7 +467,7 @@ pub const FOLLOW_PASSES: usize = 3;
 /// settled, px.
 const FOLLOW_SETTLED_PX: f64 = 0.25;
 /// Fraction of followed markers that may be lost (and left out) before
-/// [`follow`] gives up and [`follow_or_search`] searches around them.
+/// [`follow`] gives up and [`follow_or_search`] searches the whole frame.
 pub const FOLLOW_MAX_LOST: f64 = 0.01;
 /// A followed marker below this fraction of the frame's median marker
 /// contrast is lost (faded, covered).
@@ -1268,7 +1124,7 @@ mod tests {
     }
 
     #[test]
-    fn a_press_is_searched_around_its_lost_markers_only() {
+    fn a_press_that_loses_markers_is_searched_in_the_whole_frame() {
         use crate::synth::{render, Press, Scene};
         let sensor = Category::Nominal.sensor(640, 480, 3);
         let rest = rest_frame(&sensor, 4);
@@ -1278,47 +1134,35 @@ mod tests {
         )
         .unwrap();
         let reach = 0.3 * cal.pitch_px;
+        let radii = &cal.centroid_radii_px;
         let (found, search) =
-            follow_or_search(&rest.image, &cal.detector, &cal.rest_markers, &[], reach);
+            follow_or_search(&rest.image, &cal.detector, &cal.rest_markers, radii, reach);
         assert_eq!(search, Search::Followed);
         assert_eq!(found.len(), cal.rest_markers.len());
         // A strong press moves the markers around it beyond the reach.
-        let press = Press {
-            centre: PointPx::new(300.0, 250.0),
-            width_px: 30.0,
-            strength: 1.0,
-            shear_px: PointPx::new(0.0, 0.0),
-        };
         let pressed = render(&Scene {
             sensor: sensor.clone(),
-            presses: vec![press],
+            presses: vec![Press {
+                centre: PointPx::new(300.0, 250.0),
+                width_px: 30.0,
+                strength: 1.0,
+                shear_px: PointPx::new(0.0, 0.0),
+            }],
             dropout: 0.0,
             seed: 5,
         });
-        let (found, search) =
-            follow_or_search(&pressed.image, &cal.detector, &cal.rest_markers, &[], reach);
-        let Search::Local([x0, y0, x1, y1]) = search else {
-            panic!("{search:?}");
-        };
-        assert!(x0 < 300 && 300 < x1 && y0 < 250 && 250 < y1, "{search:?}");
-        assert!((x1 - x0) * (y1 - y0) < 640 * 480 / 4, "{search:?}");
-        // As many markers as the whole-frame search, as close to the truth.
-        let whole = detect(&pressed.image, &cal.detector).positions();
-        let local = found.positions();
-        assert_eq!(local.len(), whole.len());
-        let on_truth = |v: &[PointPx]| {
-            let m = test_fixtures::match_points(v, &pressed.markers, 1.5);
-            let mut e: Vec<f64> = m.iter().map(|x| x.2).collect();
-            e.sort_by(f64::total_cmp);
-            (m.len(), e[e.len() / 2])
-        };
-        let ((n_local, med_local), (n_whole, med_whole)) = (on_truth(&local), on_truth(&whole));
-        assert_eq!(n_local, n_whole);
-        assert!(med_local <= med_whole + 0.02, "{med_local} vs {med_whole}");
-        // A blank frame loses them all: the whole frame is searched.
+        let (found, search) = follow_or_search(
+            &pressed.image,
+            &cal.detector,
+            &cal.rest_markers,
+            radii,
+            reach,
+        );
+        assert_eq!(search, Search::Full);
+        assert_eq!(found, detect(&pressed.image, &cal.detector));
         let blank = GreyFrame::new(640, 480, vec![20; 640 * 480]).unwrap();
         let (found, search) =
-            follow_or_search(&blank, &cal.detector, &cal.rest_markers, &[], reach);
+            follow_or_search(&blank, &cal.detector, &cal.rest_markers, radii, reach);
         assert_eq!(search, Search::Full);
         assert!(found.is_empty());
     }

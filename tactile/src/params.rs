@@ -158,9 +158,8 @@ pub struct MarkerParams {
     /// Bright markers (TacTip pins), dark ones (GelSight-type dots), or
     /// `auto`: decided on the rest frame.
     pub polarity: Polarity,
-    /// Follow the rest markers in small windows and search only around the
-    /// ones it loses (see `markers::follow_or_search`); off: search
-    /// the whole frame every time.
+    /// Follow the rest markers in small windows and search the whole frame
+    /// only when that loses markers (see `markers::follow_or_search`).
     pub follow: bool,
 }
 

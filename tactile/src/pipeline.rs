@@ -4,9 +4,8 @@
 //!
 //! Skipping what a scene doesn't need:
 //! - the markers are followed from their rest places in small windows
-//!   ([`markers::follow_or_search`]); only when a contact loses some of
-//!   them is the box around those searched, and the whole frame only when
-//!   most of the skin is lost;
+//!   ([`markers::follow_or_search`]); the whole frame is searched only when
+//!   a contact loses some of them;
 //! - a marker *moved* when it is displaced beyond `max(move_noise_px,
 //!   move_noise_sigmas x jitter)`, the jitter measured on the frame itself
 //!   ([`tracking::track_adaptive`]); when no marker moved *strongly*
@@ -33,7 +32,7 @@ use crate::tracking::{self, Field};
 use crate::PointPx;
 
 /// A followed marker further than this many pitches from its rest place is
-/// lost, and searched for around its place: a marker that moved further (a
+/// lost, and the frame searched in full: a marker that moved further (a
 /// shear) could be followed onto its neighbour's blob. Measured on the
 /// shear scenes: 0.5 let such swaps through (centre error p95 13 px
 /// against 3.6 px), 0.3 does not.
@@ -84,9 +83,9 @@ pub struct FrameResult {
     /// Fewer than half the rest markers were found (blank, covered or
     /// non-tactile frame): reported as no contact.
     pub blank: bool,
-    /// How the markers were found: followed from their rest positions,
-    /// followed with a search around the lost ones, or searched in the
-    /// whole frame ([`markers::follow_or_search`]; following off: whole).
+    /// How the markers were found: followed from their rest positions, or
+    /// searched in the whole frame ([`markers::follow_or_search`];
+    /// following off: whole).
     pub search: Search,
     /// Density grid cells computed.
     pub density_cells: usize,
