@@ -358,40 +358,17 @@ const RADIAL_CONE_DEG: f64 = 30.0;
 mod tests {
     use super::*;
 
-    /// A hex lattice of pitch `pitch` laid along a dome (arc length from
-    /// the apex = lattice distance) up to polar angle `rim_deg`, projected.
-    fn dome_lattice(dome: &Dome, pitch: f64, rim_deg: f64) -> Vec<PointPx> {
-        let max_arc = dome.radius_px * rim_deg.to_radians();
-        let mut out = Vec::new();
-        let rows = (max_arc / (pitch * 0.866)).ceil() as i64;
-        for j in -rows..=rows {
-            let y = j as f64 * pitch * 0.866;
-            let shift = if j % 2 == 0 { 0.0 } else { 0.5 * pitch };
-            let cols = (max_arc / pitch).ceil() as i64 + 1;
-            for i in -cols..=cols {
-                let x = i as f64 * pitch + shift;
-                let arc = x.hypot(y);
-                if arc > max_arc {
-                    continue;
-                }
-                let polar = arc / dome.radius_px;
-                let s = if arc > 0.0 {
-                    dome.radius_px * polar.sin() / arc
-                } else {
-                    1.0
-                };
-                out.push(PointPx::new(dome.centre.x + x * s, dome.centre.y + y * s));
-            }
-        }
-        out
-    }
-
-    fn flat_lattice(pitch: f64, radius: f64) -> Vec<PointPx> {
-        let dome = Dome {
-            centre: PointPx::new(320.0, 240.0),
-            radius_px: 1e9,
+    /// The generator's domed skin with its rim at `rim_deg` (seen at 220 px
+    /// in a 640x480 frame): rest markers, sphere radius, apex.
+    fn dome_lattice(rim_deg: f64) -> (Vec<PointPx>, f64, PointPx) {
+        let mut sensor = crate::synth::SensorSpec::domed(640, 480);
+        let rim = rim_deg.to_radians();
+        let dome = crate::synth::Dome {
+            radius_px: 220.0 / rim.sin(),
+            rim_polar_rad: rim,
         };
-        dome_lattice(&dome, pitch, (radius / 1e9).to_degrees())
+        sensor.dome = Some(dome);
+        (sensor.rest_markers(), dome.radius_px, sensor.centre)
     }
 
     #[test]
@@ -474,25 +451,22 @@ mod tests {
 
     #[test]
     fn a_dome_is_found_with_its_radius_and_a_flat_skin_stays_flat() {
+        // Rims at 40 and 65 deg (foreshortening 0.77 and 0.42).
         for rim_deg in [40.0, 65.0] {
-            let truth = Dome {
-                centre: PointPx::new(320.0, 240.0),
-                radius_px: 220.0 / f64::sin(f64::to_radians(rim_deg)),
-            };
-            let pts = dome_lattice(&truth, 14.0, rim_deg);
+            let (pts, radius_px, apex) = dome_lattice(rim_deg);
             let Surface::Dome(d) = estimate(&pts) else {
                 panic!("rim {rim_deg} deg: taken for flat");
             };
-            let rel = (d.radius_px - truth.radius_px).abs() / truth.radius_px;
+            let rel = (d.radius_px - radius_px).abs() / radius_px;
             assert!(
-                rel < 0.08,
-                "rim {rim_deg}: radius {} vs {}",
-                d.radius_px,
-                truth.radius_px
+                rel < 0.03,
+                "rim {rim_deg}: radius {} vs {radius_px}",
+                d.radius_px
             );
-            assert!((d.centre.x - 320.0).abs() < 2.0 && (d.centre.y - 240.0).abs() < 2.0);
+            assert!((d.centre.x - apex.x).abs() < 2.0 && (d.centre.y - apex.y).abs() < 2.0);
         }
-        assert_eq!(estimate(&flat_lattice(14.0, 220.0)), Surface::Flat);
+        let flat = crate::synth::SensorSpec::nominal(640, 480).rest_markers();
+        assert_eq!(estimate(&flat), Surface::Flat);
         assert_eq!(estimate(&[]), Surface::Flat);
         let nan = vec![PointPx::new(f64::NAN, 1.0); 50];
         assert_eq!(estimate(&nan), Surface::Flat);
