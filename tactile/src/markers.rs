@@ -325,7 +325,7 @@ pub enum Search {
 /// 45ed751) and measured slower on 640x480 frames: following every marker
 /// to find the box costs about half a whole search, so large contacts and
 /// scattered dropout took 0.93 and 0.80 ms against 0.66 and 0.59
-/// (BENCHMARKS.md, "Domes, and a search around lost markers").
+/// (BENCHMARKS.md, section "Domes": "Tried and not kept").
 pub fn follow_or_search(
     frame: &GreyFrame,
     det: &Detector,
