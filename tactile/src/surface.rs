@@ -6,7 +6,7 @@
 //! pushes the markers along the dome, away from the contact along great
 //! circles; in the image those paths are arcs of ellipses whose tangents at
 //! the markers miss the contact's image, towards the rim by pixels. The
-//! tracked contact centre ([`crate::tracking::radial_centre`]) meets the
+//! tracked contact centre ([`crate::tracking::radial_centre_on`]) meets the
 //! displacement lines in a plane where they are straight again: the
 //! **gnomonic chart** of the dome (central projection from the sphere's
 //! centre onto the plane touching the apex), which maps every great circle
@@ -16,8 +16,9 @@
 //! The dome is estimated from the rest markers ([`estimate`]): the skin's
 //! pins sit at a regular pitch along its surface, so the right sphere makes
 //! the distances between radial neighbours *along the surface* most
-//! uniform, while in the image they shrink towards the rim by `cos(theta)`. A flat skin gives no
-//! improvement over the image and stays [`Surface::Flat`]. The camera is
+//! uniform, while in the image they shrink towards the rim by
+//! `cos(theta)`. A flat skin gives no improvement over the image and stays
+//! [`Surface::Flat`]. The camera is
 //! taken as orthographic (the dome's axis through the sensing area's
 //! centre); a strong perspective would need the lens.
 
