@@ -18,9 +18,9 @@
 //! the distances between radial neighbours *along the surface* most
 //! uniform, while in the image they shrink towards the rim by
 //! `cos(theta)`. A flat skin gives no improvement over the image and stays
-//! [`Surface::Flat`]. The camera is
-//! taken as orthographic (the dome's axis through the sensing area's
-//! centre); a strong perspective would need the lens.
+//! [`Surface::Flat`]. The camera is taken as orthographic (the dome's axis
+//! through the sensing area's centre); a strong perspective would need the
+//! lens.
 
 use serde::Deserialize;
 
