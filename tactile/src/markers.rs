@@ -188,11 +188,7 @@ fn positive(frame: &GreyFrame, dark: bool) -> std::borrow::Cow<'_, GreyFrame> {
 
 /// Stage 2 entry: detects the markers of a working frame.
 pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
-    detect_positive(&positive(frame, det.dark), det)
-}
-
-/// [`detect`] on a frame already made bright-marker ([`positive`]).
-fn detect_positive(frame: &GreyFrame, det: &Detector) -> Markers {
+    let frame = &*positive(frame, det.dark);
     let (fw, fh) = (frame.width(), frame.height());
     let [x0, y0, x1, y1] = det.window_px.unwrap_or([0, 0, fw, fh]);
     let (x1, y1) = (x1.min(fw), y1.min(fh));
@@ -284,7 +280,7 @@ pub fn follow(
 ) -> Option<Markers> {
     let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
-    let (list, _) = follow_each(frame, det, near, radii_px, reach_px, max_lost)?;
+    let list = follow_each(frame, det, near, radii_px, reach_px, max_lost)?;
     Some(Markers {
         list: list.into_iter().flatten().collect(),
     })
@@ -303,7 +299,7 @@ pub fn follow_all(
 ) -> Vec<Option<PointPx>> {
     let frame = &*positive(frame, det.dark);
     follow_each(frame, det, near, radii_px, reach_px, usize::MAX)
-        .map(|(list, _)| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
+        .map(|list| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
         .unwrap_or_else(|| vec![None; near.len()])
 }
 
@@ -362,11 +358,9 @@ fn follow_one(
 }
 
 /// Follows each of `near` ([`follow`]; each with its centroid radius from
-/// `radii_px`, or the detector's past its end): per marker, the marker or `None`,
-/// and the indices of the lost ones (moved beyond `reach_px`, faded, or the
-/// second of two that ran into one blob). `None` once more than `max_lost`
-/// are lost.
-#[allow(clippy::type_complexity)]
+/// `radii_px`, or the detector's past its end): per marker, the marker or
+/// `None` when it is lost (moved beyond `reach_px`, faded, or the second of
+/// two that ran into one blob). `None` once more than `max_lost` are lost.
 fn follow_each(
     frame: &GreyFrame,
     det: &Detector,
@@ -374,8 +368,8 @@ fn follow_each(
     radii_px: &[f64],
     reach_px: f64,
     max_lost: usize,
-) -> Option<(Vec<Option<Marker>>, Vec<usize>)> {
-    let mut lost = Vec::new();
+) -> Option<Vec<Option<Marker>>> {
+    let mut lost = 0usize;
     let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
     for (k, &p) in near.iter().enumerate() {
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
@@ -384,27 +378,27 @@ fn follow_each(
                 && det.area.as_ref().is_none_or(|a| a.contains(at))
         });
         if kept.is_none() {
-            lost.push(k);
-            if lost.len() > max_lost {
+            lost += 1;
+            if lost > max_lost {
                 return None;
             }
         }
         found.push(kept);
     }
     let median = percentile(found.iter().flatten().map(|f| f.1).collect(), 0.5);
-    for (k, f) in found.iter_mut().enumerate() {
+    for f in found.iter_mut() {
         if f.is_some_and(|f| f.1 < FOLLOW_MIN_CONTRAST * median) {
             *f = None;
-            lost.push(k);
+            lost += 1;
         }
     }
-    if lost.len() > max_lost {
+    if lost > max_lost {
         return None;
     }
     let mut taken = Occupancy::new(frame.width(), frame.height());
     let mut claimed: Vec<Marker> = Vec::with_capacity(found.len());
     let mut out = Vec::with_capacity(found.len());
-    for (k, f) in found.into_iter().enumerate() {
+    for f in found {
         let Some((pos, contrast, area_px)) = f else {
             out.push(None);
             continue;
@@ -412,9 +406,9 @@ fn follow_each(
         if !taken.claim(pos, DUPLICATE_PX, &claimed) {
             // Two markers ran into one blob: a contact squeezes them; a
             // search sorts that out.
-            lost.push(k);
+            lost += 1;
             out.push(None);
-            if lost.len() > max_lost {
+            if lost > max_lost {
                 return None;
             }
             continue;
@@ -430,7 +424,7 @@ fn follow_each(
         claimed.push(m);
         out.push(Some(m));
     }
-    Some((out, lost))
+    Some(out)
 }
 
 /// The centroid window's radius for each of `points`: `radius_px`, or less
