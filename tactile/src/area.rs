@@ -91,6 +91,14 @@ impl WorkToInput {
             self.origin_px.y + (p.y + 0.5) * self.scale_y - 0.5,
         )
     }
+
+    /// Input point -> working point (the inverse of [`WorkToInput::apply`]).
+    pub fn to_work(&self, q: PointPx) -> PointPx {
+        PointPx::new(
+            (q.x - self.origin_px.x + 0.5) / self.scale_x - 0.5,
+            (q.y - self.origin_px.y + 0.5) / self.scale_y - 0.5,
+        )
+    }
 }
 
 /// Errors of an area given in the config.

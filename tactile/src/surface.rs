@@ -57,10 +57,7 @@ impl SurfaceSpec {
                 centre_px,
                 radius_px,
             } => Surface::Dome(Dome {
-                centre: PointPx::new(
-                    (centre_px[0] - map.origin_px.x + 0.5) / map.scale_x - 0.5,
-                    (centre_px[1] - map.origin_px.y + 0.5) / map.scale_y - 0.5,
-                ),
+                centre: map.to_work(PointPx::new(centre_px[0], centre_px[1])),
                 radius_px: 2.0 * radius_px / (map.scale_x + map.scale_y),
             }),
         }
