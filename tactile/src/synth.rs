@@ -223,13 +223,13 @@ pub struct Dome {
     pub rim_polar_rad: f64,
 }
 
-type Vec3 = [f64; 3];
+pub(crate) type Vec3 = [f64; 3];
 
-fn dot(a: Vec3, b: Vec3) -> f64 {
+pub(crate) fn dot(a: Vec3, b: Vec3) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-fn cross(a: Vec3, b: Vec3) -> Vec3 {
+pub(crate) fn cross(a: Vec3, b: Vec3) -> Vec3 {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -238,7 +238,7 @@ fn cross(a: Vec3, b: Vec3) -> Vec3 {
 }
 
 /// Rotation of `v` about the unit axis `k` by `angle` (Rodrigues).
-fn rotate(v: Vec3, k: Vec3, angle: f64) -> Vec3 {
+pub(crate) fn rotate(v: Vec3, k: Vec3, angle: f64) -> Vec3 {
     let (s, c) = angle.sin_cos();
     let kv = cross(k, v);
     let kd = dot(k, v) * (1.0 - c);
@@ -249,7 +249,7 @@ fn rotate(v: Vec3, k: Vec3, angle: f64) -> Vec3 {
     ]
 }
 
-fn normalized(v: Vec3) -> Option<Vec3> {
+pub(crate) fn normalized(v: Vec3) -> Option<Vec3> {
     let n = dot(v, v).sqrt();
     (n > 1e-12).then(|| [v[0] / n, v[1] / n, v[2] / n])
 }

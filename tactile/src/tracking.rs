@@ -475,36 +475,17 @@ mod tests {
         let cur: Vec<PointPx> = rest
             .iter()
             .map(|&p| {
+                use crate::synth::{cross, dot, normalized, rotate};
                 let m = dome.lift(centre, p).0;
-                let g = 230.0
-                    * (m[0] * c[0] + m[1] * c[1] + m[2] * c[2])
-                        .clamp(-1.0, 1.0)
-                        .acos();
-                let axis = [
-                    c[1] * m[2] - c[2] * m[1],
-                    c[2] * m[0] - c[0] * m[2],
-                    c[0] * m[1] - c[1] * m[0],
-                ];
-                let n = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
-                if g > 40.0 || n < 1e-9 {
-                    return p;
+                let g = 230.0 * dot(m, c).clamp(-1.0, 1.0).acos();
+                // About the axis from c towards m: away from the press.
+                match normalized(cross(c, m)) {
+                    Some(k) if g <= 40.0 => {
+                        let angle = 3.0 * (-(g * g) / (2.0 * 15.0 * 15.0)).exp() / 230.0;
+                        dome.project(centre, crate::synth::DomePoint(rotate(m, k, angle)))
+                    }
+                    _ => p,
                 }
-                let k = [axis[0] / n, axis[1] / n, axis[2] / n];
-                let angle = 3.0 * (-(g * g) / (2.0 * 15.0 * 15.0)).exp() / 230.0;
-                // Rodrigues, about k (from c towards m: away from the press).
-                let (sn, cs) = angle.sin_cos();
-                let kv = [
-                    k[1] * m[2] - k[2] * m[1],
-                    k[2] * m[0] - k[0] * m[2],
-                    k[0] * m[1] - k[1] * m[0],
-                ];
-                let kd = (k[0] * m[0] + k[1] * m[1] + k[2] * m[2]) * (1.0 - cs);
-                let v = [
-                    m[0] * cs + kv[0] * sn + k[0] * kd,
-                    m[1] * cs + kv[1] * sn + k[1] * kd,
-                    m[2] * cs + kv[2] * sn + k[2] * kd,
-                ];
-                dome.project(centre, crate::synth::DomePoint(v))
             })
             .collect();
         let field = track(&rest, &cur, 640, 480, 6.0, 0.05);
