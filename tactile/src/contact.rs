@@ -12,8 +12,9 @@
 //!
 //! With [`CentreMethod::Hybrid`] the centre comes from the tracked markers
 //! around the region ([`crate::tracking::radial_centre_on`], in the chart of
-//! a domed skin, [`crate::surface`]) when that fit is consistent, and contacts too small to dent the density (width below ~h)
-//! are found from the tracked markers alone.
+//! a domed skin, [`crate::surface`]) when that fit is consistent, and
+//! contacts too small to dent the density (width below ~h) are found from
+//! the tracked markers alone.
 //!
 //! ```
 //! use dexitac_tactile::contact::{segment, Region};
