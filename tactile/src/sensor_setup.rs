@@ -724,7 +724,19 @@ mod tests {
         let r = tune(&rest.image, pins, &base).unwrap();
         assert!(r.exact);
         assert_eq!(r.markers.lobe_px, None, "the automatic scale was replaced");
-        assert!(r.tried <= TUNE_RATIO_STEPS.count(), "{r:?}");
+        // One sweep, at the configured scale, up to the first threshold
+        // that finds fewer.
+        let one_sweep = TUNE_RATIO_STEPS
+            .map(|s| {
+                let markers = MarkerParams {
+                    strength_ratio: s as f32 * RATIO_STEP,
+                    ..base.markers.clone()
+                };
+                count_markers(&rest.image, &markers)
+            })
+            .position(|n| n < pins)
+            .map_or(TUNE_RATIO_STEPS.count(), |k| k + 1);
+        assert_eq!(r.tried, one_sweep, "{r:?}");
     }
 
     #[test]
