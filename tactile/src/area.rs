@@ -292,12 +292,16 @@ impl SensingArea {
         if !p.is_finite() {
             return false;
         }
-        let (x, y) = (p.x.round(), p.y.round());
-        if x < 0.0 || y < 0.0 || y as usize >= self.height {
+        // Rounded to the nearest pixel; below -0.5 is outside. `+ 0.5` and
+        // truncation round without a libm call (the per-marker hot path).
+        if p.x <= -0.5 || p.y <= -0.5 {
             return false;
         }
-        let x = x as usize;
-        self.rows[y as usize]
+        let (x, y) = ((p.x + 0.5) as usize, (p.y + 0.5) as usize);
+        if y >= self.height {
+            return false;
+        }
+        self.rows[y]
             .iter()
             .any(|&(a, b)| (a as usize) <= x && x < b as usize)
     }
@@ -488,6 +492,27 @@ mod tests {
             }
         }
         v
+    }
+
+    #[test]
+    fn a_point_belongs_to_its_nearest_pixel() {
+        // Pixels x, y in 0..=2 of a 5x4 frame.
+        let area = SensingArea::from_fn(5, 4, |x, y| x <= 2.0 && y <= 2.0);
+        let inside = [(-0.49, 0.0), (0.0, -0.49), (2.49, 2.49), (1.0, 1.0)];
+        let outside = [
+            (-0.5, 0.0),
+            (0.0, -0.5),
+            (2.5, 0.0),
+            (0.0, 2.5),
+            (4.0, 9.0),
+            (f64::NAN, 0.0),
+        ];
+        assert!(inside
+            .iter()
+            .all(|&(x, y)| area.contains(PointPx::new(x, y))));
+        assert!(outside
+            .iter()
+            .all(|&(x, y)| !area.contains(PointPx::new(x, y))));
     }
 
     #[test]

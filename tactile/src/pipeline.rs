@@ -137,15 +137,27 @@ impl Pipeline {
         };
         let t1 = Instant::now();
         let positions = markers.positions();
-        let field = tracking::track_adaptive(
-            &cal.rest_markers,
-            &positions,
-            cal.width,
-            cal.height,
-            0.5 * cal.pitch_px,
-            cp.move_noise_px,
-            cp.move_noise_sigmas,
-        );
+        let field = match search {
+            // Each followed marker knows its rest marker: no matching.
+            Search::Followed => tracking::track_known_adaptive(
+                &cal.rest_markers,
+                markers
+                    .list
+                    .iter()
+                    .filter_map(|m| Some((m.followed_from?, m.pos))),
+                cp.move_noise_px,
+                cp.move_noise_sigmas,
+            ),
+            Search::Full => tracking::track_adaptive(
+                &cal.rest_markers,
+                &positions,
+                cal.width,
+                cal.height,
+                0.5 * cal.pitch_px,
+                cp.move_noise_px,
+                cp.move_noise_sigmas,
+            ),
+        };
         // A frame with under half the rest markers is blank, covered or not
         // a tactile image: no contact rather than a guess.
         let blank = 2 * markers.len() < cal.rest_markers.len();

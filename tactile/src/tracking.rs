@@ -197,7 +197,33 @@ pub fn track_adaptive(
     floor_px: f64,
     sigmas: f64,
 ) -> Field {
-    let mut field = match_rest(rest, current, width, height, search_px);
+    let field = match_rest(rest, current, width, height, search_px);
+    mark_moved_adaptive(field, floor_px, sigmas)
+}
+
+/// [`track_adaptive`] for markers whose rest marker is known, `(rest index,
+/// position)` (followed markers, [`crate::markers::follow`]): no matching
+/// is needed; a rest marker without one is lost.
+pub fn track_known_adaptive(
+    rest: &[PointPx],
+    known: impl IntoIterator<Item = (usize, PointPx)>,
+    floor_px: f64,
+    sigmas: f64,
+) -> Field {
+    let mut field = Field {
+        displacement: vec![None; rest.len()],
+        ..Field::default()
+    };
+    for (n, p) in known {
+        if let Some(r) = rest.get(n) {
+            field.displacement[n] = Some(PointPx::new(p.x - r.x, p.y - r.y));
+        }
+    }
+    field.lost = field.displacement.iter().filter(|u| u.is_none()).count();
+    mark_moved_adaptive(field, floor_px, sigmas)
+}
+
+fn mark_moved_adaptive(mut field: Field, floor_px: f64, sigmas: f64) -> Field {
     field.jitter_px = jitter_sigma_px(&field.displacement);
     // `max` ignores a NaN product (sigmas is validated finite anyway).
     let threshold_px = floor_px.max(sigmas * field.jitter_px);
@@ -569,6 +595,40 @@ mod tests {
             // the estimate, which is within 25 % of sigma) is rarer than
             // 1e-4 per marker: at most a few of ~350 markers.
             proptest::prop_assert!(f.moved.len() <= 3, "{} moved, {:?}", f.moved.len(), f.moved_px);
+        }
+
+        /// Markers that know their rest marker give the field matching
+        /// would give (each within a third of the pitch of its rest place),
+        /// and a rest marker without one is lost.
+        #[test]
+        fn known_rest_markers_give_the_matched_field(
+            sigma in 0.0f64..1.5,
+            gone in 0usize..300,
+            seed in proptest::prelude::any::<u64>(),
+        ) {
+            let rest = test_fixtures::hex_points(300, 300, 15.0);
+            let noise = jitter_field(rest.len(), sigma, seed);
+            let cur: Vec<(usize, PointPx)> = rest
+                .iter()
+                .zip(&noise)
+                .enumerate()
+                .filter(|&(k, _)| k != gone)
+                .map(|(k, (p, u))| {
+                    let u = u.unwrap_or_default();
+                    (k, PointPx::new(p.x + u.x.clamp(-4.0, 4.0), p.y + u.y.clamp(-4.0, 4.0)))
+                })
+                .collect();
+            let positions: Vec<PointPx> = cur.iter().map(|&(_, p)| p).collect();
+            let matched = track_adaptive(&rest, &positions, 300, 300, 7.5, 0.1, 6.0);
+            let known = track_known_adaptive(&rest, cur.iter().copied(), 0.1, 6.0);
+            proptest::prop_assert_eq!(known.lost, usize::from(gone < rest.len()));
+            if gone >= rest.len() {
+                proptest::prop_assert_eq!(&known.displacement, &matched.displacement);
+                proptest::prop_assert_eq!(&known.moved, &matched.moved);
+            } else {
+                proptest::prop_assert!(known.displacement[gone].is_none());
+                proptest::prop_assert!(known.moved.contains(&gone));
+            }
         }
     }
 }
