@@ -71,6 +71,12 @@ pub struct Calibration {
     /// Per rest marker, the radius of its centroid window when followed
     /// ([`markers::centroid_radii`]: smaller where a neighbour is close).
     pub centroid_radii_px: Vec<f64>,
+    /// Per rest marker, its contrast on the rest frames when followed, grey
+    /// levels: following calls a marker faded against its own contrast, so
+    /// a dot dimmed at rest (vignetting, a second pin colour) is not lost.
+    /// Empty for a rest estimated from the frames (the frame's median
+    /// contrast is the reference then).
+    pub rest_contrast: Vec<f32>,
 }
 
 impl Calibration {
@@ -109,7 +115,7 @@ pub fn calibrate_mapped(
     // On a dome, detect again with the strength threshold eased by the
     // foreshortening: the thin ellipses of the outer rings were too weak
     // for the flat threshold.
-    let mut cal = if cal.surface == Surface::Flat {
+    let cal = if cal.surface == Surface::Flat {
         cal
     } else {
         detector.surface = cal.surface;
@@ -118,25 +124,69 @@ pub fn calibrate_mapped(
             h,
             detector.clone(),
             stable_markers(rest, &detector),
-            given,
+            given.clone(),
             params,
             map,
         )?
     };
-    settle(rest, &mut cal);
+    // The rest is what the live pipeline finds on the rest frames: the
+    // markers settled where following finds them, the ones it cannot follow
+    // dropped, and the density, area and pitch made from those.
+    let mut cal = cal;
+    let settled = settle(rest, &cal);
+    if settled.len() < MIN_REST_MARKERS {
+        return Err(CalibrationError::TooFewMarkers {
+            found: settled.len(),
+        });
+    }
+    cal.rest_markers = settled;
+    let (rest_density, mask, centroid_radii_px) =
+        reference(&cal.rest_markers, &cal.density, &cal.detector);
+    (cal.rest_density, cal.mask, cal.centroid_radii_px) = (rest_density, mask, centroid_radii_px);
+    cal.rest_contrast = rest_contrast(rest, &cal);
     Ok(cal)
 }
 
-/// Moves each rest marker to where following finds it on the rest frames
-/// (the mean over them; [`markers::follow_all`]), so that a frame without
-/// contact, followed, has its markers where the rest says. The search's
-/// centroid (one window of the detector's radius) and the followed one
-/// (re-centred, in a window that stops short of close neighbours) differ
-/// by up to a pixel on a dome's crowded outer rings and on dense blurred
-/// skins; unsettled, every such marker would look moved in every frame.
-fn settle(rest: &[GreyFrame], cal: &mut Calibration) {
+/// Each rest marker where following finds it on the rest frames (the mean
+/// over them; [`markers::follow_all`]), so that a frame without contact,
+/// followed, has its markers where the rest says; a marker that following
+/// loses on any rest frame (a dot dimmed by vignetting below the follow's
+/// contrast floor, one cut by the frame's edge) is left out: it would be
+/// lost in every frame, and a rest frame would not be followed on itself
+/// (the whole-frame search and a false contact where it is missing). The
+/// search's centroid (one window of the detector's radius) and the followed
+/// one (re-centred, in a window that stops short of close neighbours)
+/// differ by up to a pixel on a dome's crowded outer rings and on dense
+/// blurred skins; unsettled, every such marker would look moved in every
+/// frame.
+fn settle(rest: &[GreyFrame], cal: &Calibration) -> Vec<PointPx> {
+    followed_on(rest, cal)
+        .into_iter()
+        .filter(|s| s.3 == rest.len())
+        .map(|s| PointPx::new(s.0 / s.3 as f64, s.1 / s.3 as f64))
+        .collect()
+}
+
+/// Each rest marker's mean contrast on the rest frames, followed (0 where
+/// it is never followed).
+fn rest_contrast(rest: &[GreyFrame], cal: &Calibration) -> Vec<f32> {
+    followed_on(rest, cal)
+        .into_iter()
+        .map(|s| {
+            if s.3 == 0 {
+                0.0
+            } else {
+                (s.2 / s.3 as f64) as f32
+            }
+        })
+        .collect()
+}
+
+/// Per rest marker, the sums of its followed x, y and contrast over the
+/// rest frames, and the number of frames it was followed on.
+fn followed_on(rest: &[GreyFrame], cal: &Calibration) -> Vec<(f64, f64, f64, usize)> {
     let reach_px = crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px;
-    let mut sums: Vec<(f64, f64, usize)> = vec![(0.0, 0.0, 0); cal.rest_markers.len()];
+    let mut sums = vec![(0.0, 0.0, 0.0, 0); cal.rest_markers.len()];
     for frame in rest {
         let found = markers::follow_all(
             frame,
@@ -145,18 +195,18 @@ fn settle(rest: &[GreyFrame], cal: &mut Calibration) {
             &cal.centroid_radii_px,
             reach_px,
         );
-        for (s, p) in sums.iter_mut().zip(found) {
-            if let Some(p) = p {
-                *s = (s.0 + p.x, s.1 + p.y, s.2 + 1);
+        for (s, m) in sums.iter_mut().zip(found) {
+            if let Some(m) = m {
+                *s = (
+                    s.0 + m.pos.x,
+                    s.1 + m.pos.y,
+                    s.2 + m.strength as f64,
+                    s.3 + 1,
+                );
             }
         }
     }
-    for (m, s) in cal.rest_markers.iter_mut().zip(sums) {
-        // Followed on every rest frame: settled; otherwise keep the search's.
-        if s.2 == rest.len() {
-            *m = PointPx::new(s.0 / s.2 as f64, s.1 / s.2 as f64);
-        }
-    }
+    sums
 }
 
 /// Markers of `rest[0]` of typical size found in every rest frame, at
@@ -355,16 +405,7 @@ fn finish(
         step_px: params.density.grid_step_px as usize,
         truncate_sigmas: params.density.truncate_sigmas,
     };
-    let rest_density = density::estimate(&rest_markers, &density, None);
-    let mut mask = sensing_mask(&rest_density);
-    let grid = density.grid();
-    if let Some(area) = &detector.area {
-        for (k, m) in mask.iter_mut().enumerate() {
-            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
-            *m &= area.contains(p);
-        }
-    }
-    let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
+    let (rest_density, mask, centroid_radii_px) = reference(&rest_markers, &density, &detector);
     Ok(Calibration {
         width: w,
         height: h,
@@ -376,7 +417,29 @@ fn finish(
         mask,
         surface,
         centroid_radii_px,
+        rest_contrast: Vec::new(),
     })
+}
+
+/// What the rest markers give every frame: the rest density, the sensing
+/// mask on its grid (where the rest density is, inside the detector's
+/// area) and each marker's centroid window radius.
+fn reference(
+    rest_markers: &[PointPx],
+    density: &DensitySetup,
+    detector: &Detector,
+) -> (DensityMap, Vec<bool>, Vec<f64>) {
+    let rest_density = density::estimate(rest_markers, density, None);
+    let mut mask = sensing_mask(&rest_density);
+    let grid = density.grid();
+    if let Some(area) = &detector.area {
+        for (k, m) in mask.iter_mut().enumerate() {
+            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
+            *m &= area.contains(p);
+        }
+    }
+    let centroid_radii_px = markers::centroid_radii(rest_markers, detector.radius_px);
+    (rest_density, mask, centroid_radii_px)
 }
 
 /// The bounding box of the rest markers grown by a pitch, the marker size and

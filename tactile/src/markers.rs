@@ -271,39 +271,53 @@ pub fn detect(frame: &GreyFrame, det: &Detector) -> Markers {
 /// ([`centroid_radii`]; the detector's for markers past the slice's end).
 /// `None` (search the whole frame with [`detect`]
 /// instead) when more than [`FOLLOW_MAX_LOST`] of them are lost: moved more
-/// than `reach_px`, faded below [`FOLLOW_MIN_CONTRAST`] of the frame's
-/// median marker contrast (or the detector's absolute floor), or merged
-/// with another. A frame without contact costs one window per marker
-/// instead of a pass over every pixel.
+/// than `reach_px`, faded, or merged with another. Faded: its contrast,
+/// over its own contrast at rest in `contrast` (the calibration's
+/// [`crate::calibrate::Calibration::rest_contrast`]; 1 past the slice's
+/// end), is below [`FOLLOW_MIN_CONTRAST`] of the frame's median of that
+/// ratio (or below the detector's absolute floor): a dot dimmed by
+/// vignetting at rest is not faded as long as it keeps its own contrast.
+/// A frame without contact costs one window per marker instead of a pass
+/// over every pixel.
 pub fn follow(
     frame: &GreyFrame,
     det: &Detector,
     near: &[PointPx],
     radii_px: &[f64],
+    contrast: &[f32],
     reach_px: f64,
 ) -> Option<Markers> {
     let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
-    let list = follow_each(frame, det, near, radii_px, reach_px, max_lost)?;
+    let list = follow_each(
+        frame,
+        det,
+        near,
+        radii_px,
+        Some(contrast),
+        reach_px,
+        max_lost,
+    )?;
     Some(Markers {
         list: list.into_iter().flatten().collect(),
     })
 }
 
-/// Where each of `near` is followed to in `frame` ([`follow`], nothing
-/// given up): `None` for the lost ones. The calibration settles the rest
-/// markers with it, so that a followed frame without contact finds them
-/// where the rest says.
+/// What each of `near` is followed to in `frame` ([`follow`], nothing
+/// given up, and no marker called faded: the rest frames are where each
+/// marker's own contrast is measured): `None` for the lost ones (its
+/// [`Marker::strength`] is its contrast, grey levels). The calibration
+/// settles the rest markers with it, so that a followed frame without
+/// contact finds them where the rest says, and records their contrast.
 pub fn follow_all(
     frame: &GreyFrame,
     det: &Detector,
     near: &[PointPx],
     radii_px: &[f64],
     reach_px: f64,
-) -> Vec<Option<PointPx>> {
+) -> Vec<Option<Marker>> {
     let frame = &*positive(frame, det.dark);
-    follow_each(frame, det, near, radii_px, reach_px, usize::MAX)
-        .map(|list| list.into_iter().map(|m| m.map(|m| m.pos)).collect())
+    follow_each(frame, det, near, radii_px, None, reach_px, usize::MAX)
         .unwrap_or_else(|| vec![None; near.len()])
 }
 
@@ -331,9 +345,10 @@ pub fn follow_or_search(
     det: &Detector,
     near: &[PointPx],
     radii_px: &[f64],
+    contrast: &[f32],
     reach_px: f64,
 ) -> (Markers, Search) {
-    match follow(frame, det, near, radii_px, reach_px) {
+    match follow(frame, det, near, radii_px, contrast, reach_px) {
         Some(m) => (m, Search::Followed),
         None => (detect(frame, det), Search::Full),
     }
@@ -362,7 +377,9 @@ fn follow_one(
 }
 
 /// Follows each of `near` ([`follow`]; each with its centroid radius from
-/// `radii_px`, or the detector's past its end): per marker, the marker or
+/// `radii_px`, or the detector's past its end, and its rest contrast from
+/// `contrast`, or 1 past its end; no fading test with `None`): per marker,
+/// the marker or
 /// `None` when it is lost (moved beyond `reach_px`, faded, or the second of
 /// two that ran into one blob). `None` once more than `max_lost` are lost.
 fn follow_each(
@@ -370,6 +387,7 @@ fn follow_each(
     det: &Detector,
     near: &[PointPx],
     radii_px: &[f64],
+    contrast: Option<&[f32]>,
     reach_px: f64,
     max_lost: usize,
 ) -> Option<Vec<Option<Marker>>> {
@@ -390,10 +408,24 @@ fn follow_each(
         found.push(kept);
     }
     let median = percentile(found.iter().flatten().map(|f| f.1).collect(), 0.5);
-    for f in found.iter_mut() {
-        if f.is_some_and(|f| f.1 < FOLLOW_MIN_CONTRAST * median) {
-            *f = None;
-            lost += 1;
+    // Each marker's contrast over its own at rest, and the frame's light:
+    // the median of that ratio.
+    if let Some(contrast) = contrast {
+        let at_rest = |k: usize| contrast.get(k).copied().filter(|&c| c > 0.0).unwrap_or(1.0);
+        let ratio = |k: usize, c: f32| c / at_rest(k);
+        let light = percentile(
+            found
+                .iter()
+                .enumerate()
+                .filter_map(|(k, f)| f.map(|f| ratio(k, f.1)))
+                .collect(),
+            0.5,
+        );
+        for (k, f) in found.iter_mut().enumerate() {
+            if f.is_some_and(|f| ratio(k, f.1) < FOLLOW_MIN_CONTRAST * light) {
+                *f = None;
+                lost += 1;
+            }
         }
     }
     if lost > max_lost {
@@ -1243,8 +1275,15 @@ mod tests {
         .unwrap();
         let reach = 0.3 * cal.pitch_px;
         let radii = &cal.centroid_radii_px;
-        let (found, search) =
-            follow_or_search(&rest.image, &cal.detector, &cal.rest_markers, radii, reach);
+        let contrast = &cal.rest_contrast;
+        let (found, search) = follow_or_search(
+            &rest.image,
+            &cal.detector,
+            &cal.rest_markers,
+            radii,
+            contrast,
+            reach,
+        );
         assert_eq!(search, Search::Followed);
         assert_eq!(found.len(), cal.rest_markers.len());
         // A strong press moves the markers around it beyond the reach.
@@ -1264,13 +1303,20 @@ mod tests {
             &cal.detector,
             &cal.rest_markers,
             radii,
+            contrast,
             reach,
         );
         assert_eq!(search, Search::Full);
         assert_eq!(found, detect(&pressed.image, &cal.detector));
         let blank = GreyFrame::new(640, 480, vec![20; 640 * 480]).unwrap();
-        let (found, search) =
-            follow_or_search(&blank, &cal.detector, &cal.rest_markers, radii, reach);
+        let (found, search) = follow_or_search(
+            &blank,
+            &cal.detector,
+            &cal.rest_markers,
+            radii,
+            contrast,
+            reach,
+        );
         assert_eq!(search, Search::Full);
         assert!(found.is_empty());
     }

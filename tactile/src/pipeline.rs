@@ -130,6 +130,7 @@ impl Pipeline {
                 &cal.detector,
                 &cal.rest_markers,
                 &cal.centroid_radii_px,
+                &cal.rest_contrast,
                 FOLLOW_REACH_PITCH * cal.pitch_px,
             )
         } else {
