@@ -55,7 +55,8 @@ pub struct Calibration {
     pub height: usize,
     /// The marker detector.
     pub detector: Detector,
-    /// Reference marker positions, working px.
+    /// Reference marker positions, working px: where following finds them
+    /// on the rest frames (markers it loses there are left out).
     pub rest_markers: Vec<PointPx>,
     /// Median nearest-neighbour distance of the rest markers, px.
     pub pitch_px: f64,

@@ -500,8 +500,9 @@ const FOLLOW_SETTLED_PX: f64 = 0.25;
 /// Fraction of followed markers that may be lost (and left out) before
 /// [`follow`] gives up and [`follow_or_search`] searches the whole frame.
 pub const FOLLOW_MAX_LOST: f64 = 0.01;
-/// A followed marker below this fraction of the frame's median marker
-/// contrast is lost (faded, covered).
+/// A followed marker whose contrast, over its own at rest, is below this
+/// fraction of the frame's median such ratio is lost (faded, covered); see
+/// [`follow`].
 pub const FOLLOW_MIN_CONTRAST: f32 = 0.3;
 
 /// The middle of the flat top that starts at candidate `(x, y)` (a

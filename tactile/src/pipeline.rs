@@ -392,6 +392,39 @@ mod tests {
     }
 
     #[test]
+    fn a_strongly_vignetted_rest_is_followed_on_itself_without_contact() {
+        // Light falls by 93 % towards the rim: the outer rings' contrast is
+        // under 0.3 of the frame's median. Following judges each marker
+        // against its own contrast at rest, so another rest frame is
+        // followed whole (judged against the median, the outer rings were
+        // "faded" and the frame searched in full: the GelSlim rest frame
+        // then showed a contact where the search missed its corner dots).
+        let mut sensor = Category::NoContact.sensor(640, 480, 5);
+        sensor.vignette = 0.93;
+        let params = Params::default();
+        let rest = synth::rest_frame(&sensor, 1);
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
+        let truth = rest.markers.len();
+        assert!(
+            cal.rest_markers.len() + truth / 100 >= truth,
+            "{} of {truth} rest markers",
+            cal.rest_markers.len()
+        );
+        let p = Pipeline::new(cal, params);
+        for seed in [2, 3, 4] {
+            let again = synth::rest_frame(&sensor, seed);
+            let r = p.run(&again.image).unwrap();
+            assert_eq!(r.search, Search::Followed, "seed {seed}");
+            assert!(r.contact.is_none(), "seed {seed}: {:?}", r.contact);
+            assert!(
+                r.markers.len() + truth / 100 >= truth,
+                "seed {seed}: {}",
+                r.markers.len()
+            );
+        }
+    }
+
+    #[test]
     fn pipeline_can_run_on_its_own_thread_per_sensor() {
         fn send_sync<T: Send + Sync>() {}
         send_sync::<Pipeline>();
