@@ -8,6 +8,7 @@ Bad arrays, configs and frames raise ``ValueError``; unreadable files raise
 """
 
 import os
+from pathlib import Path
 from typing import Any, Iterator, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -226,7 +227,7 @@ class Recording:
     """An MCAP recording; iterate it for its frames in file order."""
 
     @property
-    def path(self) -> str: ...
+    def path(self) -> Path: ...
     @property
     def sensors(self) -> list[int]: ...
     @property

@@ -44,6 +44,19 @@ def test_process_matches_analyze(fixture, cli, tmp_path, request):
     assert contacts >= len(s.frames) // 2, "the comparison must cover contacts"
 
 
+def test_several_rest_frames_match_analyze(nominal, cli, tmp_path):
+    # `--rest A --rest B`: markers found in every rest frame, averaged. The
+    # second rest frame is the first with its pixels' lowest bit flipped.
+    other = tmp_path / "rest2.png"
+    rest2 = nominal.rest ^ np.uint8(1)
+    write_png(other, rest2)
+    frames = nominal.frame_paths[:4]
+    rows = analyze_csv(cli, tmp_path, "--rest", nominal.rest_path, "--rest", other, *frames)
+    sensor = dexitac.Sensor.from_rest([nominal.rest, rest2])
+    for path, frame in zip(frames, nominal.frames):
+        assert_row_matches(rows[path.stem], sensor.process(frame), tmp_path / "markers" / f"{path.stem}.csv")
+
+
 def test_config_crop_and_rgb_match_analyze(nominal, cli, tmp_path):
     # A crop and a kernel width from a config file; the frames as RGB.
     config = tmp_path / "sensor.toml"
