@@ -2,7 +2,8 @@
 """Time `dexitac.Sensor.process` against the usual Python pipelines, in one run.
 
     python python/bench.py --dexitac target/release/dexitac [--frames 40] [--seed 1]
-        [--rounds 5] [--set-dir data/real/SET] [--out table.md]
+        [--rounds 5] [--set-dir data/real/SET [--rest REST.png] [--max-frames N]]
+        [--out table.md]
 
 On the same frames (numpy arrays decoded once beforehand), single-threaded,
 one tool after the other:
@@ -36,10 +37,12 @@ from __future__ import annotations
 import argparse
 import csv
 import math
+import os
 import platform
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -91,7 +94,11 @@ def main() -> int:
     ap.add_argument("--frames", type=int, default=40, help="synthetic frames")
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--rounds", type=int, default=5, help="passes of dexitac over the frames (baselines: 1)")
+    ap.add_argument("--thread-rounds", type=int, default=20,
+                    help="passes of each of two sensors over the frames, one thread then two")
     ap.add_argument("--set-dir", type=Path, help="a real set (rest.png, frames/*.png) instead of synthetic frames")
+    ap.add_argument("--rest", type=Path, help="with --set-dir: the rest frame (default SET/rest.png)")
+    ap.add_argument("--max-frames", type=int, help="with --set-dir: only the first N frames (name order)")
     ap.add_argument("--kernel-px", type=float, default=15.0, help="baselines' kernel width h, px")
     ap.add_argument("--out", type=Path, help="also write the table here")
     a = ap.parse_args()
@@ -100,8 +107,8 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix="dexitac-bench-"))
     truth: dict[str, tuple[float, float]] = {}
     if a.set_dir:
-        set_name, rest_path = a.set_dir.name, a.set_dir / "rest.png"
-        frame_paths = sorted((a.set_dir / "frames").glob("*.png"))
+        set_name, rest_path = a.set_dir.name, a.rest or a.set_dir / "rest.png"
+        frame_paths = sorted((a.set_dir / "frames").glob("*.png"))[: a.max_frames]
     else:
         set_name, rest_path = SYNTH, tmp / "rest.png"
         subprocess.run([str(a.dexitac), "-q", "synth-frames", "--out", str(tmp), "--frames", str(a.frames),
@@ -117,6 +124,7 @@ def main() -> int:
     sensor = dexitac.Sensor.from_rest(rest)
     py_ms: list[float] = []
     rust_ms: list[float] = []
+    detect_ms: dict[str, list[float]] = {"dexitac": []}
     centres: dict[str, dict[str, tuple[float, float]]] = {"dexitac": {}}
     for _ in range(a.rounds):
         for name, f in zip(names, frames):
@@ -124,15 +132,39 @@ def main() -> int:
             obs = sensor.process(f)
             py_ms.append((time.perf_counter() - t0) * 1e3)
             rust_ms.append(obs.times.total_ms)
+            detect_ms["dexitac"].append(obs.times.detect_ms)
             if obs.contact:
                 centres["dexitac"][name] = obs.contact.centre_px
+
+    # Two sensors: one after the other in one thread, then in two threads
+    # (`process` releases the GIL).
+    pair = [sensor, dexitac.Sensor.from_rest(rest)]
+
+    def work(s: dexitac.Sensor) -> None:
+        for _ in range(a.thread_rounds):
+            for f in frames:
+                s.process(f)
+
+    t0 = time.perf_counter()
+    for s in pair:
+        work(s)
+    one_thread_s = time.perf_counter() - t0
+    threads = [threading.Thread(target=work, args=(s,)) for s in pair]
+    t0 = time.perf_counter()
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    two_threads_s = time.perf_counter() - t0
 
     # The CLI on the same files.
     pred = tmp / "pred.csv"
     subprocess.run([str(a.dexitac), "-q", "analyze", "--rest", str(rest_path), "--out", str(pred),
                     *map(str, frame_paths)], check=True)
     with open(pred, newline="") as f:
-        cli_ms = [float(r["t_total_ms"]) for r in csv.DictReader(f)]
+        cli_rows = list(csv.DictReader(f))
+    cli_ms = [float(r["t_total_ms"]) for r in cli_rows]
+    detect_ms["cli"] = [float(r["t_detect_ms"]) for r in cli_rows]
 
     # The baselines, one round each (they take 20-500 ms per frame).
     base_ms: dict[str, list[float]] = {}
@@ -140,10 +172,12 @@ def main() -> int:
         b = baselines.Baseline(kind, set_name, a.kernel_px, rest.shape[:2])
         b.calibrate(rest)
         base_ms[kind] = []
+        detect_ms[kind] = []
         centres[kind] = {}
         for name, f in zip(names, frames):
             r = b.run(f)
             base_ms[kind].append(r.t_total_ms)
+            detect_ms[kind].append(r.t_detect_ms)
             if math.isfinite(r.cx):
                 centres[kind][name] = (r.cx, r.cy)
     load_after = uptime()
@@ -156,28 +190,32 @@ def main() -> int:
 
     py_med, _ = stats(py_ms)
     rows = [
-        ("dexitac (Python: `Sensor.process`, wall clock)", py_ms, "dexitac"),
-        ("dexitac (Rust, same calls: `times.total_ms`)", rust_ms, "dexitac"),
-        ("dexitac analyze (CLI: `t_total_ms`)", cli_ms, "dexitac"),
-        ("OpenCV SimpleBlobDetector + numpy KDE (eval/baselines.py)", base_ms["opencv"], "opencv"),
-        ("scikit-image blob_doh + numpy KDE (eval/baselines.py)", base_ms["doh"], "doh"),
+        ("dexitac (Python: `Sensor.process`, wall clock)", py_ms, "dexitac", "dexitac"),
+        ("dexitac (Rust, same calls: `times.total_ms`)", rust_ms, "dexitac", "dexitac"),
+        ("dexitac analyze (CLI: `t_total_ms`)", cli_ms, "dexitac", "cli"),
+        ("OpenCV SimpleBlobDetector + numpy KDE (eval/baselines.py)", base_ms["opencv"], "opencv", "opencv"),
+        ("scikit-image blob_doh + numpy KDE (eval/baselines.py)", base_ms["doh"], "doh", "doh"),
     ]
     n = len(frames)
     lines = [
         f"Frames: {'synthetic, `dexitac synth-frames --frames %d --seed %d`' % (a.frames, a.seed) if not a.set_dir else a.set_dir} "
         f"({n} frames, {rest.shape[1]}x{rest.shape[0]} px); dexitac {a.rounds} rounds, baselines 1; single thread.",
         "",
-        "| tool | ms/frame median | ms/frame p95 | Python dexitac faster by | frames with contact | centre error median px |",
-        "|---|---|---|---|---|---|",
+        "| tool | ms/frame median | ms/frame p95 | Python dexitac faster by | detection ms median "
+        "| frames with contact | centre error median px |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for label, ms, tool in rows:
+    for label, ms, tool, detect in rows:
         med, p95 = stats(ms)
         found = len(centres[tool])
-        lines.append(f"| {label} | {med:.3f} | {p95:.3f} | {med / py_med:.1f}x | {found}/{n} | {err(tool)} |")
+        lines.append(f"| {label} | {med:.3f} | {p95:.3f} | {med / py_med:.1f}x | {stats(detect_ms[detect])[0]:.3f} "
+                     f"| {found}/{n} | {err(tool)} |")
     lines += [
         "",
         f"Python wall clock over the Rust time of the same calls: {py_med / stats(rust_ms)[0]:.3f}; "
         f"over the CLI's: {py_med / stats(cli_ms)[0]:.3f}.",
+        f"Two sensors, {a.thread_rounds} x {n} frames each: one thread {one_thread_s:.2f} s, two threads "
+        f"{two_threads_s:.2f} s ({one_thread_s / two_threads_s:.2f}x; {len(os.sched_getaffinity(0))} CPUs usable).",
         f"Machine: {cpu_model()}, {platform.machine()}, Python {platform.python_version()}, "
         f"numpy {np.__version__}, OpenCV {baselines.cv2.__version__}, dexitac {dexitac.__version__}.",
         f"Date: {datetime.now(timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}.",
