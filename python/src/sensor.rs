@@ -102,11 +102,12 @@ impl Sensor {
 
     /// Prepares frames (list or single array) as working frames.
     fn prepare_all(&self, frames: &Bound<'_, PyAny>, what: &str) -> PyResult<Vec<GreyFrame>> {
-        sequence(frames, what)?
+        let frames = sequence(frames, what)?;
+        frames
             .iter()
             .enumerate()
             .map(|(k, f)| {
-                let name = item_name(what, k, usize::MAX);
+                let name = item_name(what, k, frames.len());
                 let a = FrameArray::borrow(f, &name)?;
                 self.check_size(&a, &name)?;
                 Ok(a.prepare(&self.prepare, &name)?.grey)
@@ -247,8 +248,9 @@ impl Sensor {
 
     /// Runs the pipeline on one frame (same size and kind as the rest):
     /// grey, crop, rescale, markers, tracking, density, contact. With
-    /// `density=True` the observation also carries the full density grid
-    /// (computed after the pipeline, not timed).
+    /// `density=True` the observation also carries the density on the whole
+    /// grid (computed again after the pipeline, which only computes it near
+    /// moved markers; not in the times).
     ///
     /// The GIL is released while the frame is processed: sensors in other
     /// threads run in parallel. Do not write to `frame` from another thread
@@ -288,19 +290,21 @@ impl Sensor {
         self.observation(py, &result, prepare_ms, grid)
     }
 
-    /// Tunes the marker detector so the rest frame shows `pins` markers, as
-    /// `dexitac sensor tune --pins N`; returns the result with the tuned
-    /// sensor config (TOML text, for `config=`). ValueError for pins < 7.
+    /// Tunes the marker detector so the (first) rest frame shows `pins`
+    /// markers, as `dexitac sensor tune --pins N`; returns the result with
+    /// the tuned sensor config (TOML text, for `config=`). ValueError for
+    /// pins < 7 or a sensor made by `from_rest_frames` (no rest frame).
     fn tune(&self, py: Python<'_>, pins: usize) -> PyResult<TuneResult> {
         let rest = self.first_rest("tune")?;
         let base = &self.pipeline.params;
         py.detach(|| tune_on(rest, pins, base))
     }
 
-    /// Checks the skin on current no-contact frames against the rest frame,
-    /// as `dexitac sensor health`: missing, merged, extra, damaged or
-    /// flickering markers, coverage, jitter; verdict "pass", "warn" or
-    /// "fail". No frames: the rest frame is checked against itself.
+    /// Checks the skin on current no-contact frames against the (first)
+    /// rest frame, as `dexitac sensor health`: missing, merged, extra,
+    /// damaged or flickering markers, coverage, jitter; verdict "pass",
+    /// "warn" or "fail". No frames: the rest frame is checked against
+    /// itself. Not for a sensor made by `from_rest_frames` (ValueError).
     #[pyo3(signature = (frames=None, pins=None, min_coverage_pct=98.0, max_jitter_px=0.5))]
     fn health(
         &self,

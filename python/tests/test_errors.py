@@ -149,3 +149,27 @@ def test_observation_fields(sensor, nominal):
     i, j = int(c.centre_work_px[0] // step), int(c.centre_work_px[1] // step)
     assert d[j, i] < rest[j, i]
     assert "Sensor(" in repr(sensor) and "Observation(" in repr(obs)
+
+
+def test_damaged_recording_raises_unless_recovered(nominal, cli, tmp_path):
+    from conftest import run_cli
+
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    (folder / "0000.png").write_bytes(nominal.rest_path.read_bytes())
+    for k, p in enumerate(nominal.frame_paths[:3]):
+        (folder / f"{k + 1:04d}.png").write_bytes(p.read_bytes())
+    whole = tmp_path / "whole.mcap"
+    run_cli(cli, "record", "--out", whole, "--frames", folder, "--max-speed")
+    rec = dexitac.read_recording(whole)
+    assert rec.damage is None and len(rec) == 3
+    assert rec[-1].t_ms == rec[2].t_ms
+    with pytest.raises(IndexError):
+        rec[3]
+    with pytest.raises(ValueError, match="no frames"):
+        rec.sensor(5)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(whole.read_bytes()[: whole.stat().st_size * 2 // 3])
+    with pytest.raises(ValueError, match="damaged"):
+        dexitac.read_recording(cut)
+    assert dexitac.read_recording(cut, recover=True).damage
