@@ -192,6 +192,32 @@ class Sensor:
     def config_toml(self) -> str:
         """The sensor config in use, TOML text (every field)."""
 
+class Shift:
+    """Frame-to-frame and from-anchor shift of the contact centre, mm."""
+
+    @property
+    def frame_to_frame_mm(self) -> Optional[float]:
+        """Against the previous frame's centre (None without both)."""
+    @property
+    def from_anchor_mm(self) -> Optional[float]:
+        """Against the held anchor (None without an anchor or a contact)."""
+
+class ShiftTracker:
+    """Follows the contact centre over frames (paper Eq. 3), in mm.
+
+    ``dexitac analyze`` writes ``shift_mm`` and ``shift_from_anchor_mm``, holding
+    the first contact as the anchor.
+    """
+
+    def __init__(self, mm_per_px: float) -> None:
+        """A tracker for a sensor of ``mm_per_px`` mm per working px (``Sensor.mm_per_px``)."""
+    def update(self, frame: Union[Observation, Contact, None]) -> Shift:
+        """Feeds the next frame's contact (None: no contact); returns the shifts."""
+    def hold_anchor(self) -> bool:
+        """Holds the latest centre as the anchor; False when the latest frame had no contact."""
+    def release_anchor(self) -> None:
+        """Drops the anchor."""
+
 class RecordedContact:
     """A recorded pipeline result (``dexitac.Contact`` message)."""
 

@@ -22,6 +22,7 @@ mod arrays;
 mod config;
 mod recording;
 mod sensor;
+mod shift;
 
 /// Reads a PNG or JPEG file into a uint8 array as `dexitac analyze` decodes
 /// it: (H, W) grey, (H, W, 3) RGB or (H, W, 4) RGBA (other pixel types
@@ -63,6 +64,8 @@ fn dexitac_python(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<sensor::StageTimes>()?;
     m.add_class::<sensor::TuneResult>()?;
     m.add_class::<sensor::HealthReport>()?;
+    m.add_class::<shift::ShiftTracker>()?;
+    m.add_class::<shift::Shift>()?;
     m.add_class::<recording::Recording>()?;
     m.add_class::<recording::RecordedFrameItem>()?;
     m.add_class::<recording::RecordedContact>()?;

@@ -512,7 +512,7 @@ pub struct Contact {
     centre_px: (f64, f64),
     /// Contact centre (x, y), working px (what a recording stores).
     #[pyo3(get)]
-    centre_work_px: (f64, f64),
+    pub(crate) centre_work_px: (f64, f64),
     /// Contact centre (x, y), mm from the working frame's centre.
     #[pyo3(get)]
     centre_mm: (f64, f64),
@@ -602,6 +602,13 @@ pub struct Observation {
     /// density grid, (rows, cols) float32, markers per mm^2; else None.
     #[pyo3(get)]
     density: Option<Py<PyArray2<f32>>>,
+}
+
+impl Observation {
+    /// The contact, if any.
+    pub fn contact_ref(&self) -> Option<&Contact> {
+        self.contact.as_ref()
+    }
 }
 
 #[pymethods]

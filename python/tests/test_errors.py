@@ -173,3 +173,18 @@ def test_damaged_recording_raises_unless_recovered(nominal, cli, tmp_path):
     with pytest.raises(ValueError, match="damaged"):
         dexitac.read_recording(cut)
     assert dexitac.read_recording(cut, recover=True).damage
+
+
+def test_shift_tracker_checks_its_input(sensor, nominal):
+    with pytest.raises(ValueError):
+        dexitac.ShiftTracker(0.0)
+    t = dexitac.ShiftTracker(sensor.mm_per_px)
+    with pytest.raises(ValueError):
+        t.update("not a frame")
+    assert t.update(None).frame_to_frame_mm is None
+    assert not t.hold_anchor()
+    obs = next(o for o in map(sensor.process, nominal.frames) if o.contact is not None)
+    assert t.update(obs.contact).frame_to_frame_mm is None
+    assert t.hold_anchor()
+    s = t.update(obs)
+    assert s.frame_to_frame_mm == 0.0 and s.from_anchor_mm == 0.0

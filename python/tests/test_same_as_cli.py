@@ -37,10 +37,21 @@ def test_process_matches_analyze(fixture, cli, tmp_path, request):
     rows = analyze_csv(cli, tmp_path, "--rest", s.rest_path, *s.frame_paths)
     sensor = dexitac.Sensor.from_rest(s.rest)
     contacts = 0
+    # The shift columns: `analyze` holds the first contact as the anchor.
+    tracker = dexitac.ShiftTracker(sensor.mm_per_px)
+    mm = lambda v: "NaN" if v is None else f"{v:.4f}"  # noqa: E731
     for path, frame in zip(s.frame_paths, s.frames):
         obs = sensor.process(frame)
         contacts += obs.contact is not None
-        assert_row_matches(rows[path.stem], obs, tmp_path / "markers" / f"{path.stem}.csv")
+        row = rows[path.stem]
+        assert_row_matches(row, obs, tmp_path / "markers" / f"{path.stem}.csv")
+        shift = tracker.update(obs)
+        from_anchor = shift.from_anchor_mm
+        if obs.contact is not None and from_anchor is None:
+            assert tracker.hold_anchor()
+            from_anchor = 0.0
+        assert row["shift_mm"] == mm(shift.frame_to_frame_mm)
+        assert row["shift_from_anchor_mm"] == mm(from_anchor)
     assert contacts >= len(s.frames) // 2, "the comparison must cover contacts"
 
 
