@@ -24,6 +24,7 @@ LAYERS = {
     "dexitac-sim": 3,
     "dexitac-view": 4,
     "dexitac": 5,
+    "dexitac-python": 5,
     "dexitac-e2e": 6,
     "dexitac-benches": 6,
 }
