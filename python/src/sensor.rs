@@ -472,19 +472,7 @@ pub fn tune_on(rest: &GreyFrame, pins: usize, base: &Params) -> PyResult<TuneRes
         markers: r.markers.clone(),
         ..base.clone()
     };
-    let lobe = r.markers.lobe_px.map_or("auto".into(), |l| l.to_string());
-    let summary = format!(
-        "{} of {} pins found (the base config found {before}); lobe_px = {lobe}, \
-         strength_ratio = {:.2}{}, min_contrast = {}; {} settings tried",
-        r.found,
-        r.pins,
-        r.markers.strength_ratio,
-        r.ratio_range.map_or(String::new(), |(lo, hi)| format!(
-            " (exact for {lo:.2}..={hi:.2})"
-        )),
-        r.markers.min_contrast,
-        r.tried
-    );
+    let summary = r.summary(before);
     let text = sensor_setup::params_toml(
         &tuned,
         &format!("Sensor config tuned by dexitac.Sensor.tune.\n{summary}"),

@@ -114,6 +114,30 @@ pub struct TuneResult {
     pub tried: usize,
 }
 
+impl TuneResult {
+    /// One line for the tuned config's header and the log: what was found
+    /// against the pins and against `before` (the base config's count), and
+    /// the setting.
+    pub fn summary(&self, before: usize) -> String {
+        let lobe = self
+            .markers
+            .lobe_px
+            .map_or("auto".into(), |l| l.to_string());
+        let margin = self.ratio_range.map_or(String::new(), |(lo, hi)| {
+            format!(" (exact for {lo:.2}..={hi:.2})")
+        });
+        format!(
+            "{} of {} pins found (the base config found {before}); lobe_px = {lobe}, \
+             strength_ratio = {:.2}{margin}, min_contrast = {}; {} settings tried",
+            self.found,
+            self.pins,
+            self.markers.strength_ratio,
+            self.markers.min_contrast,
+            self.tried
+        )
+    }
+}
+
 /// Markers found on `rest` with `params` (as the calibration finds them).
 pub fn count_markers(rest: &GreyFrame, params: &MarkerParams) -> usize {
     match markers::auto_detector(rest, params) {
@@ -685,6 +709,35 @@ fn mean(v: impl Iterator<Item = f64>) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tune_summary_names_the_counts_and_the_setting() {
+        let markers = MarkerParams {
+            lobe_px: Some(7),
+            strength_ratio: 0.35,
+            min_contrast: 8.0,
+            ..MarkerParams::default()
+        };
+        let r = TuneResult {
+            markers,
+            found: 331,
+            pins: 331,
+            exact: true,
+            ratio_range: Some((0.3, 0.45)),
+            tried: 12,
+        };
+        assert_eq!(
+            r.summary(325),
+            "331 of 331 pins found (the base config found 325); lobe_px = 7, \
+             strength_ratio = 0.35 (exact for 0.30..=0.45), min_contrast = 8; 12 settings tried"
+        );
+        let auto = TuneResult {
+            markers: MarkerParams::default(),
+            ratio_range: None,
+            ..r
+        };
+        assert!(auto.summary(0).contains("lobe_px = auto, strength_ratio"));
+    }
     use crate::synth::{render, rest_frame, Scene, SensorSpec};
 
     fn sensor() -> SensorSpec {

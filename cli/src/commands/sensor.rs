@@ -107,20 +107,7 @@ fn tune_inner(args: &TuneArgs) -> anyhow::Result<bool> {
         markers: r.markers.clone(),
         ..base
     };
-    let lobe = r.markers.lobe_px.map_or("auto".into(), |l| l.to_string());
-    let summary = format!(
-        "{}: {} of {} pins found (the base config found {before}); lobe_px = {lobe}, \
-         strength_ratio = {:.2}{}, min_contrast = {}; {} settings tried",
-        args.rest.display(),
-        r.found,
-        r.pins,
-        r.markers.strength_ratio,
-        r.ratio_range.map_or(String::new(), |(lo, hi)| format!(
-            " (exact for {lo:.2}..={hi:.2})"
-        )),
-        r.markers.min_contrast,
-        r.tried
-    );
+    let summary = format!("{}: {}", args.rest.display(), r.summary(before));
     let text = sensor_setup::params_toml(
         &tuned,
         &format!("Sensor config tuned by `dexitac sensor tune`.\n{summary}"),
