@@ -132,7 +132,8 @@ pub fn calibrate_mapped(
     };
     // The rest is what the live pipeline finds on the rest frames: the
     // markers settled where following finds them, the ones it cannot follow
-    // dropped, and the density, area and pitch made from those.
+    // dropped, and the rest density, mask and centroid windows made from
+    // those (area, pitch, surface and search window stay the search's).
     let mut cal = cal;
     let settled = settle(rest, &cal);
     if settled.len() < MIN_REST_MARKERS {
@@ -151,10 +152,10 @@ pub fn calibrate_mapped(
 /// Each rest marker where following finds it on the rest frames (the mean
 /// over them; [`markers::follow_all`]), so that a frame without contact,
 /// followed, has its markers where the rest says; a marker that following
-/// loses on any rest frame (a dot dimmed by vignetting below the follow's
-/// contrast floor, one cut by the frame's edge) is left out: it would be
-/// lost in every frame, and a rest frame would not be followed on itself
-/// (the whole-frame search and a false contact where it is missing). The
+/// loses on any rest frame (below the detector's contrast floor, cut by the
+/// frame's edge, run into a neighbour) is left out: it would be lost in
+/// every frame, and a rest frame would not be followed on itself (the
+/// whole-frame search, and a false contact where it is missing). The
 /// search's centroid (one window of the detector's radius) and the followed
 /// one (re-centred, in a window that stops short of close neighbours)
 /// differ by up to a pixel on a dome's crowded outer rings and on dense
