@@ -85,6 +85,14 @@ pub fn settings() -> Vec<Setting> {
             params: make(F, 4, R, H, true),
         },
         Setting {
+            name: "default, lost markers searched in the whole frame",
+            params: {
+                let mut p = Params::default();
+                p.markers.local_search = false;
+                p
+            },
+        },
+        Setting {
             name: "default: fast s8, relative, skip+ROI, tracking",
             params: Params::default(),
         },
@@ -485,7 +493,8 @@ mod tests {
     /// Prints the condition categories' table for the default setting
     /// (`cargo test --release -p dexitac-tactile --features synth --lib
     /// conditions_report -- --ignored --nocapture`; env `DEXITAC_FRAMES`,
-    /// `DEXITAC_SEED`, `DEXITAC_SETTINGS=all`, `DEXITAC_CATEGORIES=dome,tactip`).
+    /// `DEXITAC_SEED`, `DEXITAC_SETTINGS=all` or `local` (the default and the
+    /// whole-frame search of lost markers), `DEXITAC_CATEGORIES=dome,tactip`).
     #[test]
     #[ignore = "a benchmark run, minutes in debug"]
     fn conditions_report_of_the_default_setting() {
@@ -496,8 +505,12 @@ mod tests {
         let seed = env("DEXITAC_SEED")
             .and_then(|v| v.parse().ok())
             .unwrap_or(1);
+        let all = settings();
         let names: Vec<&str> = match env("DEXITAC_SETTINGS").as_deref() {
             Some("all") => vec![],
+            // The default setting and the whole-frame search of lost
+            // markers, one after the other in one run.
+            Some("local") => vec![all[all.len() - 2].name, all[all.len() - 1].name],
             _ => vec!["default: fast s8, relative, skip+ROI, tracking"],
         };
         let categories: Vec<Category> = match env("DEXITAC_CATEGORIES") {

@@ -158,9 +158,13 @@ pub struct MarkerParams {
     /// Bright markers (TacTip pins), dark ones (GelSight-type dots), or
     /// `auto`: decided on the rest frame.
     pub polarity: Polarity,
-    /// Follow the rest markers in small windows and search the whole frame
-    /// only when that loses markers (see `markers::follow_or_search`).
+    /// Follow the rest markers in small windows and search only when that
+    /// loses markers (see `markers::follow_or_search`).
     pub follow: bool,
+    /// When following loses markers, search for them only in boxes around
+    /// their rest places (unless too many are lost), instead of the whole
+    /// frame (see `markers::follow_or_search`).
+    pub local_search: bool,
 }
 
 impl Default for MarkerParams {
@@ -171,6 +175,7 @@ impl Default for MarkerParams {
             strength_ratio: 0.3,
             min_contrast: 6.0,
             follow: true,
+            local_search: true,
             polarity: Polarity::Auto,
         }
     }

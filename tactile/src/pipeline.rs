@@ -4,8 +4,9 @@
 //!
 //! Skipping what a scene doesn't need:
 //! - the markers are followed from their rest places in small windows
-//!   ([`markers::follow_or_search`]); the whole frame is searched only when
-//!   a contact loses some of them;
+//!   ([`markers::follow_or_search`]); the markers following loses are
+//!   searched for in boxes around their rest places, and the whole frame
+//!   only when a contact loses a quarter of them;
 //! - a marker *moved* when it is displaced beyond `max(move_noise_px,
 //!   move_noise_sigmas x jitter)`, the jitter measured on the frame itself
 //!   ([`tracking::track_adaptive`]); when no marker moved *strongly*
@@ -32,7 +33,7 @@ use crate::tracking::{self, Field};
 use crate::PointPx;
 
 /// A followed marker further than this many pitches from its rest place is
-/// lost, and the frame searched in full: a marker that moved further (a
+/// lost, and searched for: a marker that moved further (a
 /// shear) could be followed onto its neighbour's blob. Measured on the
 /// shear scenes: 0.5 let such swaps through (centre error p95 13 px
 /// against 3.6 px), 0.3 does not.
@@ -83,9 +84,9 @@ pub struct FrameResult {
     /// Fewer than half the rest markers were found (blank, covered or
     /// non-tactile frame): reported as no contact.
     pub blank: bool,
-    /// How the markers were found: followed from their rest positions, or
-    /// searched in the whole frame ([`markers::follow_or_search`];
-    /// following off: whole).
+    /// How the markers were found: followed from their rest positions, the
+    /// lost ones searched for around theirs, or the whole frame searched
+    /// ([`markers::follow_or_search`]; following off: whole).
     pub search: Search,
     /// Density grid cells computed.
     pub density_cells: usize,
@@ -132,6 +133,7 @@ impl Pipeline {
                 &cal.centroid_radii_px,
                 &cal.rest_contrast,
                 FOLLOW_REACH_PITCH * cal.pitch_px,
+                self.params.markers.local_search.then_some(cal.pitch_px),
             )
         } else {
             (markers::detect(frame, &cal.detector), Search::Full)
@@ -139,8 +141,9 @@ impl Pipeline {
         let t1 = Instant::now();
         let positions = markers.positions();
         let field = match search {
-            // Each followed marker knows its rest marker: no matching.
-            Search::Followed => tracking::track_known_adaptive(
+            // Each followed marker knows its rest marker, and so does each
+            // one searched for around the lost ones: no matching.
+            Search::Followed | Search::Local => tracking::track_known_adaptive(
                 &cal.rest_markers,
                 markers
                     .list

@@ -30,7 +30,7 @@ pub struct BenchArgs {
 }
 
 /// Plot colours, one per setting in `bench::settings()` order.
-const COLOURS: [([u8; 3], &str); 9] = [
+const COLOURS: [([u8; 3], &str); 10] = [
     ([200, 0, 0], "red"),
     ([255, 140, 0], "orange"),
     ([150, 100, 50], "brown"),
@@ -39,6 +39,7 @@ const COLOURS: [([u8; 3], &str); 9] = [
     ([0, 0, 220], "blue"),
     ([140, 0, 200], "purple"),
     ([255, 0, 200], "magenta"),
+    ([0, 150, 0], "green"),
     ([0, 0, 0], "black"),
 ];
 
