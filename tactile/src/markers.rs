@@ -43,6 +43,7 @@ use crate::area::SensingArea;
 use crate::frame::GreyFrame;
 use crate::params::{MarkerParams, Polarity};
 use crate::surface::Surface;
+use crate::tracking::PointIndex;
 use crate::PointPx;
 
 /// Candidate full-resolution lobes for the automatic scale search.
@@ -343,12 +344,12 @@ pub fn follow_all(
 /// How [`follow_or_search`] found a frame's markers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Search {
-    /// Every marker was followed in its own window (at most
-    /// [`FOLLOW_MAX_LOST`] lost).
+    /// Every marker was followed in its own window (none lost; without a
+    /// local search, at most [`FOLLOW_MAX_LOST`]).
     Followed,
     /// The markers were followed, and the lost ones (at most
     /// [`LOCAL_MAX_LOST`]) searched for in boxes around their rest places
-    /// ([`search_around`]).
+    /// (`search_around`).
     Local,
     /// The whole frame was searched.
     Full,
@@ -363,12 +364,13 @@ pub const LOCAL_MAX_LOST: f64 = 0.25;
 /// costs no more).
 pub const LOCAL_MAX_AREA: f64 = 0.5;
 
-/// The markers of a frame: followed from `near` ([`follow`]); when that
-/// loses more than [`FOLLOW_MAX_LOST`] of them (a contact moved, merged or
-/// hid them) and `local_pitch_px` is given, the lost ones are searched for
-/// around their rest places ([`search_around`], boxes reaching one
-/// `local_pitch_px` beyond them); when even that is too much, or
-/// `local_pitch_px` is `None`, the whole frame is searched ([`detect`]).
+/// The markers of a frame: followed from `near` ([`follow`]). With
+/// `local_pitch_px`, the markers following loses (a contact moved, merged
+/// or hid them; at most [`LOCAL_MAX_LOST`] of them) are searched for
+/// around their rest places (`search_around`, boxes reaching one
+/// `local_pitch_px` beyond them); without it, up to [`FOLLOW_MAX_LOST`]
+/// lost markers are left out. Otherwise the whole frame is searched
+/// ([`detect`]).
 ///
 /// A followed marker keeps its followed centroid; a searched one is added
 /// where no followed marker lies within `reach_px` (it is the new place of
@@ -437,7 +439,7 @@ pub fn follow_or_search(
 /// and the markers searched for ([`detect_in`]) in boxes around the lost
 /// ones: each box reaches `pitch_px` beyond a lost marker's place in
 /// `near`, plus the detector's border margin; overlapping boxes are
-/// merged. A searched marker within `same_px` of a followed one is that
+/// merged where that adds no area. A searched marker within `same_px` of a followed one is that
 /// one (followed again from there, in its window of `radii_px`, when the
 /// two centroids differ by more than [`RESETTLE_PX`]); a followed marker
 /// that moved more than [`UNCONFIRMED_STILL_PITCH`] (or faded, see there;
@@ -448,6 +450,9 @@ pub fn follow_or_search(
 /// half a pitch ([`Marker::followed_from`]), nearest pairs first, and
 /// followed again in that marker's window. `None` when the boxes cover more than [`LOCAL_MAX_AREA`] of the
 /// search window. `frame` has bright markers ([`positive`]).
+// The rest markers' three per-marker slices, the frame, the detector and
+// three lengths: bundling them would only rename `follow_or_search`'s.
+#[allow(clippy::too_many_arguments)]
 fn search_around(
     frame: &GreyFrame,
     det: &Detector,
@@ -477,11 +482,23 @@ fn search_around(
             clamp(p.x + grow + 1.0, wx0, wx1),
             clamp(p.y + grow + 1.0, wy0, wy1),
         ];
-        // Merge every box it overlaps into it, until none does.
-        while let Some(k) = boxes
-            .iter()
-            .position(|o| o[0] < b[2] && b[0] < o[2] && o[1] < b[3] && b[1] < o[3])
-        {
+        // Merge every box it overlaps into it where their bounding box is
+        // no larger than the two (a contact's cluster becomes one box,
+        // scattered lost markers stay apart), until none is left.
+        let area = |b: &[usize; 4]| (b[2] - b[0]) * (b[3] - b[1]);
+        while let Some(k) = boxes.iter().position(|o| {
+            let union = [
+                b[0].min(o[0]),
+                b[1].min(o[1]),
+                b[2].max(o[2]),
+                b[3].max(o[3]),
+            ];
+            o[0] < b[2]
+                && b[0] < o[2]
+                && o[1] < b[3]
+                && b[1] < o[3]
+                && area(&union) <= area(o) + area(&b)
+        }) {
             let o = boxes.swap_remove(k);
             b = [
                 b[0].min(o[0]),
@@ -497,11 +514,9 @@ fn search_around(
         return None;
     }
     let mut list: Vec<Marker> = found.iter().flatten().copied().collect();
-    let followed = list.len();
     // A box is too small, and a contact's share of it too large, for its
     // own typical range: the followed markers' median contrast stands in.
     let typical_range = percentile(list.iter().map(|m| m.strength).collect(), 0.5);
-    let same2 = same_px * same_px;
     // A followed marker this far inside a box is one the search can find.
     let inset = margin_px + det.radius_px;
     let still2 = (UNCONFIRMED_STILL_PITCH * pitch_px).powi(2);
@@ -534,40 +549,30 @@ fn search_around(
                 })
         })
         .collect();
+    let followed_at: Vec<PointPx> = list.iter().map(|m| m.pos).collect();
+    let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
+    let mut searched: Vec<Marker> = Vec::new();
+    let mut taken = Occupancy::new(fw, fh);
     for b in boxes {
-        let inside = |p: PointPx| {
-            p.x >= b[0] as f64 - same_px
-                && p.x < b[2] as f64 + same_px
-                && p.y >= b[1] as f64 - same_px
-                && p.y < b[3] as f64 + same_px
-        };
-        let known: Vec<usize> = (0..followed).filter(|&j| inside(list[j].pos)).collect();
         for m in detect_in(frame, det, b, Some(typical_range)) {
             let p = m.pos;
-            let nearest = known
-                .iter()
-                .map(|&j| {
-                    (
-                        j,
-                        (list[j].pos.x - p.x).powi(2) + (list[j].pos.y - p.y).powi(2),
-                    )
-                })
-                .filter(|&(_, d2)| d2 <= same2)
-                .min_by(|a, b| a.1.total_cmp(&b.1));
-            let Some((j, d2)) = nearest else {
-                // A lost marker's new place.
-                list.push(m);
+            let Some((j, d)) = followed_index.nearest(&followed_at, p, same_px) else {
+                // A lost marker's new place, unless an overlapping box
+                // found it already.
+                if taken.claim(p, DUPLICATE_PX, &searched) {
+                    searched.push(m);
+                }
                 continue;
             };
             unconfirmed[j] = false;
             // A followed marker: where the search's centroid differs, it
             // settled on part of a blob that moved (or between two); follow
             // it once more from the blob's peak, in its own window.
-            if d2 > RESETTLE_PX * RESETTLE_PX {
+            if d > RESETTLE_PX {
                 let k = list[j].followed_from.unwrap_or(usize::MAX);
                 let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
                 if let Some((pos, contrast, area_px)) =
-                    follow_one(frame, p, radius_px, det.min_contrast)
+                    follow_one(frame, p, radius_px, det.min_contrast, same_px)
                 {
                     let m = &mut list[j];
                     m.rel_strength *= contrast / m.strength.max(1.0);
@@ -587,56 +592,66 @@ fn search_around(
         !unconfirmed.get(j - 1).copied().unwrap_or(false)
     });
     // Each searched marker is the nearest lost rest marker's within half a
-    // pitch (nearest pairs first, each once), followed again in that
-    // marker's own window: its centroid is then measured as at rest.
+    // pitch (nearest pairs first, each once).
     let mut lost = vec![true; near.len()];
     for k in list.iter().filter_map(|m| m.followed_from) {
         if let Some(l) = lost.get_mut(k) {
             *l = false;
         }
     }
-    let reach2 = (0.5 * pitch_px).powi(2);
+    let lost_ids: Vec<usize> = (0..near.len()).filter(|&k| lost[k]).collect();
+    let lost_at: Vec<PointPx> = lost_ids.iter().map(|&k| near[k]).collect();
+    let reach_px = 0.5 * pitch_px;
+    let lost_index = PointIndex::new(&lost_at, fw, fh, reach_px);
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
-    for (j, m) in list
-        .iter()
-        .enumerate()
-        .filter(|(_, m)| m.followed_from.is_none())
-    {
-        for (k, r) in near.iter().enumerate().filter(|&(k, _)| lost[k]) {
-            let d2 = (m.pos.x - r.x).powi(2) + (m.pos.y - r.y).powi(2);
-            if d2 <= reach2 {
-                pairs.push((d2, j, k));
-            }
-        }
+    for (j, m) in searched.iter().enumerate() {
+        pairs.extend(
+            lost_index
+                .within(&lost_at, m.pos, reach_px)
+                .map(|(i, d2)| (d2, j, lost_ids[i])),
+        );
     }
-    pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     for (_, j, k) in pairs {
-        if !lost[k] || list[j].followed_from.is_some() {
+        let m = &mut searched[j];
+        if !lost[k] || m.followed_from.is_some() {
             continue;
         }
         lost[k] = false;
-        let m = &mut list[j];
         m.followed_from = Some(k);
+        // The search's centroid window is the detector's; a marker with a
+        // narrower one (a dome's outer rings) is measured in its own.
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
-        if let Some((pos, _, area_px)) = follow_one(frame, m.pos, radius_px, det.min_contrast) {
-            (m.pos, m.area_px) = (pos, area_px);
+        if radius_px < det.radius_px {
+            if let Some((pos, _, area_px)) =
+                follow_one(frame, m.pos, radius_px, det.min_contrast, same_px)
+            {
+                (m.pos, m.area_px) = (pos, area_px);
+            }
         }
     }
+    list.append(&mut searched);
     Some(list)
 }
 
 /// The half-maximum centroid of the blob at `start`, re-centred until it
-/// settles (at most [`FOLLOW_PASSES`] windows): position, contrast, area.
+/// settles (at most [`FOLLOW_PASSES`] windows): position, contrast, area;
+/// `None` as soon as a centroid lies further than `reach_px` from `start`.
 fn follow_one(
     frame: &GreyFrame,
     start: PointPx,
     radius_px: f64,
     min_contrast: f32,
+    reach_px: f64,
 ) -> Option<(PointPx, f32, f32)> {
     let mut at = start;
     let mut hit = None;
     for _ in 0..FOLLOW_PASSES {
         let (c, contrast, area) = refine(frame, at, radius_px, min_contrast)?;
+        // Beyond the reach the marker is lost: no more passes.
+        if (c.x - start.x).powi(2) + (c.y - start.y).powi(2) > reach_px * reach_px {
+            return None;
+        }
         let step2 = (c.x - at.x).powi(2) + (c.y - at.y).powi(2);
         at = c;
         hit = Some((c, contrast, area));
@@ -666,10 +681,8 @@ fn follow_each(
     let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
     for (k, &p) in near.iter().enumerate() {
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
-        let kept = follow_one(frame, p, radius_px, det.min_contrast).filter(|&(at, _, _)| {
-            (at.x - p.x).powi(2) + (at.y - p.y).powi(2) <= reach_px * reach_px
-                && det.area.as_ref().is_none_or(|a| a.contains(at))
-        });
+        let kept = follow_one(frame, p, radius_px, det.min_contrast, reach_px)
+            .filter(|&(at, _, _)| det.area.as_ref().is_none_or(|a| a.contains(at)));
         if kept.is_none() {
             lost += 1;
             if lost > max_lost {

@@ -98,6 +98,35 @@ impl PointIndex {
         self.nearest_but(points, *points.get(n)?, radius_px, n)
     }
 
+    /// Every point within `radius_px` of `q` (`radius_px` must not exceed
+    /// the cell size): index and squared distance, in no order.
+    pub fn within<'a>(
+        &'a self,
+        points: &'a [PointPx],
+        q: PointPx,
+        radius_px: f64,
+    ) -> impl Iterator<Item = (usize, f64)> + 'a {
+        let finite = q.is_finite();
+        // Truncation toward zero differs from floor only in (-1, 0), where
+        // the 3x3 search still covers the right cells.
+        let (ci, cj) = ((q.x / self.cell_px) as i64, (q.y / self.cell_px) as i64);
+        let r2 = radius_px * radius_px;
+        let (nx, ny) = (self.nx as i64, self.ny as i64);
+        (cj - 1..=cj + 1)
+            .filter(move |&j| finite && (0..ny).contains(&j))
+            .flat_map(move |j| {
+                (ci - 1..=ci + 1)
+                    .filter(move |&i| (0..nx).contains(&i))
+                    .map(move |i| j as usize * self.nx + i as usize)
+            })
+            .flat_map(move |c| &self.items[self.starts[c] as usize..self.starts[c + 1] as usize])
+            .filter_map(move |&n| {
+                let p = points[n as usize];
+                let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
+                (d2 <= r2).then_some((n as usize, d2))
+            })
+    }
+
     fn nearest_but(
         &self,
         points: &[PointPx],
@@ -105,28 +134,10 @@ impl PointIndex {
         radius_px: f64,
         skip: usize,
     ) -> Option<(usize, f64)> {
-        if !q.is_finite() {
-            return None;
-        }
-        // Truncation toward zero differs from floor only in (-1, 0), where
-        // the 3x3 search still covers the right cells.
-        let ci = (q.x / self.cell_px) as i64;
-        let cj = (q.y / self.cell_px) as i64;
-        let r2 = radius_px * radius_px;
-        let mut best: Option<(usize, f64)> = None;
-        for j in (cj - 1).max(0)..=(cj + 1).min(self.ny as i64 - 1) {
-            for i in (ci - 1).max(0)..=(ci + 1).min(self.nx as i64 - 1) {
-                let c = j as usize * self.nx + i as usize;
-                for &n in &self.items[self.starts[c] as usize..self.starts[c + 1] as usize] {
-                    let p = points[n as usize];
-                    let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
-                    if n as usize != skip && d2 <= r2 && best.is_none_or(|(_, bd)| d2 < bd) {
-                        best = Some((n as usize, d2));
-                    }
-                }
-            }
-        }
-        best.map(|(n, d2)| (n, d2.sqrt()))
+        self.within(points, q, radius_px)
+            .filter(|&(n, _)| n != skip)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(n, d2)| (n, d2.sqrt()))
     }
 }
 
