@@ -567,6 +567,25 @@ mod tests {
     }
 
     proptest::proptest! {
+        /// `within` lists exactly the points a scan of all of them finds
+        /// within the radius (points off the frame and at its corners too).
+        #[test]
+        fn within_lists_the_points_a_full_scan_finds(
+            pts in proptest::collection::vec((-5.0f64..45.0, -5.0f64..45.0), 0..60),
+            q in (-5.0f64..45.0, -5.0f64..45.0),
+            radius in 0.5f64..7.0,
+        ) {
+            let pts: Vec<PointPx> = pts.into_iter().map(|(x, y)| PointPx::new(x, y)).collect();
+            let q = PointPx::new(q.0, q.1);
+            let idx = PointIndex::new(&pts, 40, 40, 7.0);
+            let mut got: Vec<usize> = idx.within(&pts, q, radius).map(|(n, _)| n).collect();
+            got.sort_unstable();
+            let want: Vec<usize> = (0..pts.len())
+                .filter(|&n| (pts[n].x - q.x).powi(2) + (pts[n].y - q.y).powi(2) <= radius * radius)
+                .collect();
+            proptest::prop_assert_eq!(got, want);
+        }
+
         #[test]
         fn jitter_estimate_recovers_sigma_despite_a_press(
             sigma in 0.002f64..0.5,
