@@ -78,9 +78,24 @@ pub struct Calibration {
     /// Empty for a rest estimated from the frames (the frame's median
     /// contrast is the reference then).
     pub rest_contrast: Vec<f32>,
+    /// Places inside the rest lattice with no rest marker (a pin that
+    /// neither the search nor following found at rest): a frame's markers
+    /// are searched for there whenever following is checked by a search
+    /// ([`rest_gaps`]).
+    pub gaps_px: Vec<PointPx>,
 }
 
 impl Calibration {
+    /// What following and searching a frame need of the rest.
+    pub fn reference(&self) -> markers::Reference<'_> {
+        markers::Reference {
+            at: &self.rest_markers,
+            radii_px: &self.centroid_radii_px,
+            contrast: &self.rest_contrast,
+            gaps_px: &self.gaps_px,
+        }
+    }
+
     /// The sensing area (working px) the detector keeps markers in.
     pub fn area(&self) -> Option<&SensingArea> {
         self.detector.area.as_ref()
@@ -145,6 +160,7 @@ pub fn calibrate_mapped(
     let (rest_density, mask, centroid_radii_px) =
         reference(&cal.rest_markers, &cal.density, &cal.detector);
     (cal.rest_density, cal.mask, cal.centroid_radii_px) = (rest_density, mask, centroid_radii_px);
+    cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
     Ok(cal)
 }
@@ -344,7 +360,9 @@ pub fn calibrate_from_frames(
             PointPx::new(x, y)
         })
         .collect();
-    finish(w, h, detector, stable, given, params, map)
+    let mut cal = finish(w, h, detector, stable, given, params, map)?;
+    cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
+    Ok(cal)
 }
 
 /// Pixel-wise median of same-size frames (the lower median for an even
@@ -420,7 +438,85 @@ fn finish(
         surface,
         centroid_radii_px,
         rest_contrast: Vec::new(),
+        gaps_px: Vec::new(),
     })
+}
+
+/// A place is a gap when every rest marker around is further than this
+/// many times its own nearest-neighbour distance, or the pitch where that
+/// is larger (a regular lattice's
+/// farthest point from its markers is `1 / sqrt(3)` = 0.58 pitch).
+pub const GAP_PITCH: f64 = 0.8;
+
+/// A gap has rest markers on all four sides within this many pitches (a
+/// hole of several missing pins, not the lattice's rim).
+pub const GAP_SIDES_PITCH: f64 = 6.0;
+
+/// Places inside the rest lattice where a marker is missing: points of a
+/// half-pitch grid inside the detector's area and search window with no
+/// rest marker within [`GAP_PITCH`] of its spacing, that lie a pitch
+/// inside the area and that have rest markers within [`GAP_SIDES_PITCH`]
+/// on all four sides (a hole, not the lattice's rim). A rest made from frames whose contact hid some pins,
+/// or the median of such frames, has them.
+pub fn rest_gaps(
+    rest: &[PointPx],
+    pitch_px: f64,
+    detector: &Detector,
+    w: usize,
+    h: usize,
+) -> Vec<PointPx> {
+    if !(pitch_px.is_finite() && pitch_px > 1.0) || rest.is_empty() {
+        return Vec::new();
+    }
+    let [x0, y0, x1, y1] = detector.window_px.unwrap_or([0, 0, w, h]);
+    let around = GAP_SIDES_PITCH * pitch_px;
+    let index = PointIndex::new(rest, w, h, around);
+    let spacing: Vec<f64> = (0..rest.len())
+        .map(|n| {
+            index
+                .nearest_other(rest, n, around)
+                .map_or(pitch_px, |(_, d)| d.max(pitch_px))
+        })
+        .collect();
+    let step = 0.5 * pitch_px;
+    let mut gaps = Vec::new();
+    let mut y = y0 as f64 + step;
+    while y < y1.min(h) as f64 {
+        let mut x = x0 as f64 + step;
+        while x < x1.min(w) as f64 {
+            let p = PointPx::new(x, y);
+            x += step;
+            // A pitch inside the area (the lattice's own rim is no gap).
+            let inside = |q: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(q));
+            let d = pitch_px;
+            if ![(0.0, 0.0), (d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)]
+                .iter()
+                .all(|&(dx, dy)| inside(PointPx::new(p.x + dx, p.y + dy)))
+            {
+                continue;
+            }
+            let mut sides = [false; 4];
+            let mut empty = true;
+            for (n, d2) in index.within(rest, p, around) {
+                // Against the local spacing where it is wider than the
+                // median pitch (a dome's apex; its foreshortened rim rings
+                // are closer only radially).
+                empty &= d2 > (GAP_PITCH * spacing[n]).powi(2);
+                let (dx, dy) = (rest[n].x - p.x, rest[n].y - p.y);
+                let side = if dx.abs() >= dy.abs() {
+                    usize::from(dx > 0.0)
+                } else {
+                    2 + usize::from(dy > 0.0)
+                };
+                sides[side] = true;
+            }
+            if empty && sides.iter().all(|&s| s) {
+                gaps.push(p);
+            }
+        }
+        y += step;
+    }
+    gaps
 }
 
 /// What the rest markers give every frame: the rest density, the sensing
@@ -517,6 +613,91 @@ mod tests {
             .collect();
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
+    }
+
+    #[test]
+    fn gaps_are_missing_pins_and_a_hole_is_searched_in_every_frame() {
+        let params = Params::default();
+        for cat in [
+            Category::Nominal,
+            Category::RoundedRect,
+            Category::Dome,
+            Category::Housing,
+            Category::TacTip,
+        ] {
+            // As `test_fixtures::calibrated`, with the truth at hand.
+            let rest = rest_frame(&cat.sensor(640, 480, 5), 99);
+            let cal = calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
+            // Each gap is a true pin the rest markers miss.
+            let nearest = |ps: &[PointPx], q: &PointPx| {
+                ps.iter()
+                    .map(|p| (p.x - q.x).hypot(p.y - q.y))
+                    .fold(f64::INFINITY, f64::min)
+            };
+            for g in &cal.gaps_px {
+                let pin = rest
+                    .markers
+                    .iter()
+                    .find(|t| (t.x - g.x).hypot(t.y - g.y) < 0.5 * cal.pitch_px);
+                let pin = pin.unwrap_or_else(|| panic!("{cat:?}: gap {g:?} on no pin"));
+                assert!(
+                    nearest(&cal.rest_markers, pin) > 0.25 * cal.pitch_px,
+                    "{cat:?}: {g:?}"
+                );
+            }
+            assert!(cal.gaps_px.len() <= 2, "{cat:?}: {:?}", cal.gaps_px);
+        }
+        // Three neighbouring pins painted out of the rest frame (a pin
+        // missing at rest): a gap there; a frame that has them is followed
+        // and searched there, and all its markers are found, with no
+        // contact.
+        let sensor = Category::Nominal.sensor(640, 480, 3);
+        let rest = rest_frame(&sensor, 4);
+        let centre = PointPx::new(320.0, 240.0);
+        let mut hidden: Vec<PointPx> = rest.markers.clone();
+        hidden.sort_by(|a, b| {
+            let d = |p: &PointPx| (p.x - centre.x).hypot(p.y - centre.y);
+            d(a).total_cmp(&d(b))
+        });
+        hidden.truncate(3);
+        // Each painted with the darkest level around it (the skin).
+        let src = rest.image.data();
+        let mut data = src.to_vec();
+        let r = sensor.pitch_px * 0.4;
+        for h in &hidden {
+            let (x0, y0) = ((h.x - r) as usize, (h.y - r) as usize);
+            let (x1, y1) = ((h.x + r) as usize, (h.y + r) as usize);
+            let skin = (y0..=y1)
+                .flat_map(|y| (x0..=x1).map(move |x| src[y * 640 + x]))
+                .min()
+                .unwrap();
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    if (x as f64 - h.x).hypot(y as f64 - h.y) < r {
+                        data[y * 640 + x] = skin;
+                    }
+                }
+            }
+        }
+        let painted = GreyFrame::new(640, 480, data).unwrap();
+        let cal = calibrate(&[painted], &params).unwrap();
+        assert_eq!(cal.rest_markers.len() + 3, rest.markers.len());
+        for h in &hidden {
+            let d = cal
+                .gaps_px
+                .iter()
+                .map(|g| (g.x - h.x).hypot(g.y - h.y))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                d < 0.5 * cal.pitch_px,
+                "no gap near {h:?}: {:?}",
+                cal.gaps_px
+            );
+        }
+        let p = crate::pipeline::Pipeline::new(cal, params);
+        let r = p.run(&rest_frame(&sensor, 5).image).unwrap();
+        assert_eq!(r.markers.len(), rest.markers.len());
+        assert!(r.contact.is_none(), "{:?}", r.contact);
     }
 
     #[test]

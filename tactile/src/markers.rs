@@ -364,13 +364,28 @@ pub const LOCAL_MAX_LOST: f64 = 0.25;
 /// costs no more).
 pub const LOCAL_MAX_AREA: f64 = 0.5;
 
-/// The markers of a frame: followed from `near` ([`follow`]). With
-/// `local_pitch_px`, the markers following loses (a contact moved, merged
-/// or hid them; at most [`LOCAL_MAX_LOST`] of them) are searched for
-/// around their rest places (`search_around`, boxes reaching one
-/// `local_pitch_px` beyond them); without it, up to [`FOLLOW_MAX_LOST`]
-/// lost markers are left out. Otherwise the whole frame is searched
-/// ([`detect`]).
+/// What following and searching a frame need of the rest (the
+/// calibration's, [`crate::calibrate::Calibration::reference`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Reference<'a> {
+    /// The rest markers, working px.
+    pub at: &'a [PointPx],
+    /// Per rest marker, its centroid window's radius ([`centroid_radii`]).
+    pub radii_px: &'a [f64],
+    /// Per rest marker, its contrast at rest ([`follow`]).
+    pub contrast: &'a [f32],
+    /// Places inside the rest lattice with no rest marker (pins missing at
+    /// rest): searched whenever the lost markers are.
+    pub gaps_px: &'a [PointPx],
+}
+
+/// The markers of a frame: followed from the rest markers `rest.at`
+/// ([`follow`]). With `local_pitch_px`, the markers following loses (a
+/// contact moved, merged or hid them; at most [`LOCAL_MAX_LOST`] of them)
+/// are searched for around their rest places, and so are the rest's gaps
+/// (`search_around`, boxes reaching one `local_pitch_px` beyond them);
+/// without it, up to [`FOLLOW_MAX_LOST`] lost markers are left out.
+/// Otherwise the whole frame is searched ([`detect`]).
 ///
 /// A followed marker keeps its followed centroid; a searched one is added
 /// where no followed marker lies within `reach_px` (it is the new place of
@@ -382,12 +397,11 @@ pub const LOCAL_MAX_AREA: f64 = 0.5;
 pub fn follow_or_search(
     frame: &GreyFrame,
     det: &Detector,
-    near: &[PointPx],
-    radii_px: &[f64],
-    contrast: &[f32],
+    rest: &Reference,
     reach_px: f64,
     local_pitch_px: Option<f64>,
 ) -> (Markers, Search) {
+    let near = rest.at;
     let positive = &*positive(frame, det.dark);
     let strict = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
     let max_lost = match local_pitch_px {
@@ -406,8 +420,8 @@ pub fn follow_or_search(
         positive,
         det,
         near,
-        radii_px,
-        Some(contrast),
+        rest.radii_px,
+        Some(rest.contrast),
         reach_px,
         max_lost,
     ) else {
@@ -424,21 +438,19 @@ pub fn follow_or_search(
             (full(), Search::Full)
         };
     };
-    if lost == 0 {
+    if lost == 0 && rest.gaps_px.is_empty() {
         return (followed(), Search::Followed);
     }
-    match search_around(
-        positive, det, near, &found, radii_px, contrast, pitch_px, reach_px,
-    ) {
+    match search_around(positive, det, rest, &found, pitch_px, reach_px) {
         Some(list) => (Markers { list }, Search::Local),
         None => (full(), Search::Full),
     }
 }
 
-/// The followed markers `found` (per marker of `near`, `None` when lost)
-/// and the markers searched for ([`detect_in`]) in boxes around the lost
-/// ones: each box reaches `pitch_px` beyond a lost marker's place in
-/// `near`, plus the detector's border margin; overlapping boxes are
+/// The followed markers `found` (per rest marker of `rest.at`, `None` when
+/// lost) and the markers searched for ([`detect_in`]) in boxes around the
+/// lost ones and the rest's gaps: each box reaches `pitch_px` beyond a lost
+/// marker's rest place or a gap, plus the detector's border margin; overlapping boxes are
 /// merged where that adds no area. A searched marker within `same_px` of a followed one is that
 /// one (followed again from there, in its window of `radii_px`, when the
 /// two centroids differ by more than [`RESETTLE_PX`]); a followed marker
@@ -446,23 +458,19 @@ pub fn follow_or_search(
 /// `contrast`: each marker's at rest) and lies inside a box,
 /// where the search can see, but that no searched marker confirms is
 /// dropped (it settled between two blobs). Each searched marker that is
-/// not a followed one is given the nearest lost marker of `near` within
+/// not a followed one is given the nearest lost rest marker within
 /// half a pitch ([`Marker::followed_from`]), nearest pairs first, and
 /// followed again in that marker's window. `None` when the boxes cover more than [`LOCAL_MAX_AREA`] of the
 /// search window. `frame` has bright markers ([`positive`]).
-// The rest markers' three per-marker slices, the frame, the detector and
-// three lengths: bundling them would only rename `follow_or_search`'s.
-#[allow(clippy::too_many_arguments)]
 fn search_around(
     frame: &GreyFrame,
     det: &Detector,
-    near: &[PointPx],
+    rest: &Reference,
     found: &[Option<Marker>],
-    radii_px: &[f64],
-    contrast: &[f32],
     pitch_px: f64,
     same_px: f64,
 ) -> Option<Vec<Marker>> {
+    let (near, radii_px, contrast) = (rest.at, rest.radii_px, rest.contrast);
     let (fw, fh) = (frame.width(), frame.height());
     let [wx0, wy0, wx1, wy1] = det.window_px.unwrap_or([0, 0, fw, fh]);
     let (wx1, wy1) = (wx1.min(fw), wy1.min(fh));
@@ -472,7 +480,8 @@ fn search_around(
     let grow = pitch_px.max(0.0) + margin_px;
     let clamp = |v: f64, lo: usize, hi: usize| (v.max(lo as f64) as usize).min(hi);
     let mut boxes: Vec<[usize; 4]> = Vec::new();
-    for (p, _) in near.iter().zip(found).filter(|(_, f)| f.is_none()) {
+    let lost_places = near.iter().zip(found).filter(|(_, f)| f.is_none());
+    for p in lost_places.map(|(p, _)| p).chain(rest.gaps_px) {
         if !p.is_finite() {
             continue;
         }
@@ -1584,15 +1593,7 @@ mod tests {
         let reach = 0.3 * cal.pitch_px;
         let local = Some(cal.pitch_px);
         let run = |frame: &GreyFrame, local| {
-            follow_or_search(
-                frame,
-                &cal.detector,
-                &cal.rest_markers,
-                &cal.centroid_radii_px,
-                &cal.rest_contrast,
-                reach,
-                local,
-            )
+            follow_or_search(frame, &cal.detector, &cal.reference(), reach, local)
         };
         let (found, search) = run(&rest.image, local);
         assert_eq!(search, Search::Followed);

@@ -129,9 +129,7 @@ impl Pipeline {
             markers::follow_or_search(
                 frame,
                 &cal.detector,
-                &cal.rest_markers,
-                &cal.centroid_radii_px,
-                &cal.rest_contrast,
+                &cal.reference(),
                 FOLLOW_REACH_PITCH * cal.pitch_px,
                 self.params.markers.local_search.then_some(cal.pitch_px),
             )
