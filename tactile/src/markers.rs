@@ -28,8 +28,9 @@
 //! [`follow_or_search`] follows each rest marker in a small window,
 //! searches for the ones it loses (moved too far, hidden or merged by a
 //! contact) in boxes around their rest places, and searches the whole
-//! frame when a contact lost a quarter of them. On a dome ([`crate::surface`]) the
-//! strength threshold is eased by the foreshortening, and each marker's
+//! frame when a contact lost a quarter of them. On a dome
+//! ([`crate::surface`]) the strength threshold is eased by the
+//! foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
 //! ([`centroid_radii`]).
 //!
@@ -447,21 +448,21 @@ pub fn follow_or_search(
     }
 }
 
-/// The followed markers `found` (per rest marker of `rest.at`, `None` when
-/// lost) and the markers searched for ([`detect_in`]) in boxes around the
-/// lost ones and the rest's gaps: each box reaches `pitch_px` beyond a lost
-/// marker's rest place or a gap, plus the detector's border margin; overlapping boxes are
-/// merged where that adds no area. A searched marker within `same_px` of a followed one is that
-/// one (followed again from there, in its window of `radii_px`, when the
-/// two centroids differ by more than [`RESETTLE_PX`]); a followed marker
-/// that moved more than [`UNCONFIRMED_STILL_PITCH`] (or faded, see there;
-/// `contrast`: each marker's at rest) and lies inside a box,
-/// where the search can see, but that no searched marker confirms is
-/// dropped (it settled between two blobs). Each searched marker that is
-/// not a followed one is given the nearest lost rest marker within
-/// half a pitch ([`Marker::followed_from`]), nearest pairs first, and
-/// followed again in that marker's window. `None` when the boxes cover more than [`LOCAL_MAX_AREA`] of the
-/// search window. `frame` has bright markers ([`positive`]).
+/// The followed markers `found` (per rest marker of `rest.at`, `None`
+/// when lost) and the markers searched for ([`detect_in`]) in boxes around
+/// the lost ones and the rest's gaps: each box reaches `pitch_px` beyond a
+/// lost marker's rest place or a gap, plus the detector's border margin;
+/// overlapping boxes are merged where that adds no area. A searched
+/// marker within `same_px` of a followed one is that one
+/// (followed again from there, in its window of `rest.radii_px`, when the
+/// two centroids differ by more than [`RESETTLE_PX`]). A followed marker
+/// that moved more than [`UNCONFIRMED_STILL_PITCH`] (or faded, see there)
+/// and lies inside a box, where the search can see, but that no searched
+/// marker confirms is dropped (it settled between two blobs). Each
+/// searched marker that is not a followed one is given the nearest lost
+/// rest marker within half a pitch ([`Marker::followed_from`]), nearest
+/// pairs first. `None` when the boxes cover more than [`LOCAL_MAX_AREA`]
+/// of the search window. `frame` has bright markers ([`positive`]).
 fn search_around(
     frame: &GreyFrame,
     det: &Detector,
