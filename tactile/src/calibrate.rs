@@ -444,8 +444,8 @@ fn finish(
 
 /// A place is a gap when every rest marker around is further than this
 /// many times its own nearest-neighbour distance, or the pitch where that
-/// is larger (a regular lattice's
-/// farthest point from its markers is `1 / sqrt(3)` = 0.58 pitch).
+/// is larger (a regular lattice's farthest point from its markers is
+/// `1 / sqrt(3)` = 0.58 pitch).
 pub const GAP_PITCH: f64 = 0.8;
 
 /// A gap has rest markers on all four sides within this many pitches (a
@@ -456,8 +456,9 @@ pub const GAP_SIDES_PITCH: f64 = 6.0;
 /// half-pitch grid inside the detector's area and search window with no
 /// rest marker within [`GAP_PITCH`] of its spacing, that lie a pitch
 /// inside the area and that have rest markers within [`GAP_SIDES_PITCH`]
-/// on all four sides (a hole, not the lattice's rim). A rest made from frames whose contact hid some pins,
-/// or the median of such frames, has them.
+/// on all four sides (a hole, not the lattice's rim). A rest made from
+/// frames whose contact hid some pins, or the median of such frames, has
+/// them.
 pub fn rest_gaps(
     rest: &[PointPx],
     pitch_px: f64,

@@ -480,6 +480,15 @@ fn search_around(
     let margin_px = (((3 * lobe - 1) / 2 + 1) * det.bin.max(1)) as f64;
     let grow = pitch_px.max(0.0) + margin_px;
     let clamp = |v: f64, lo: usize, hi: usize| (v.max(lo as f64) as usize).min(hi);
+    let area = |b: &[usize; 4]| (b[2] - b[0]) * (b[3] - b[1]);
+    let union = |a: &[usize; 4], b: &[usize; 4]| {
+        [
+            a[0].min(b[0]),
+            a[1].min(b[1]),
+            a[2].max(b[2]),
+            a[3].max(b[3]),
+        ]
+    };
     let mut boxes: Vec<[usize; 4]> = Vec::new();
     let lost_places = near.iter().zip(found).filter(|(_, f)| f.is_none());
     for p in lost_places.map(|(p, _)| p).chain(rest.gaps_px) {
@@ -495,32 +504,19 @@ fn search_around(
         // Merge every box it overlaps into it where their bounding box is
         // no larger than the two (a contact's cluster becomes one box,
         // scattered lost markers stay apart), until none is left.
-        let area = |b: &[usize; 4]| (b[2] - b[0]) * (b[3] - b[1]);
         while let Some(k) = boxes.iter().position(|o| {
-            let union = [
-                b[0].min(o[0]),
-                b[1].min(o[1]),
-                b[2].max(o[2]),
-                b[3].max(o[3]),
-            ];
             o[0] < b[2]
                 && b[0] < o[2]
                 && o[1] < b[3]
                 && b[1] < o[3]
-                && area(&union) <= area(o) + area(&b)
+                && area(&union(o, &b)) <= area(o) + area(&b)
         }) {
-            let o = boxes.swap_remove(k);
-            b = [
-                b[0].min(o[0]),
-                b[1].min(o[1]),
-                b[2].max(o[2]),
-                b[3].max(o[3]),
-            ];
+            b = union(&boxes.swap_remove(k), &b);
         }
         boxes.push(b);
     }
-    let area: usize = boxes.iter().map(|b| (b[2] - b[0]) * (b[3] - b[1])).sum();
-    if area as f64 > LOCAL_MAX_AREA * window_area as f64 {
+    let covered: usize = boxes.iter().map(area).sum();
+    if covered as f64 > LOCAL_MAX_AREA * window_area as f64 {
         return None;
     }
     let mut list: Vec<Marker> = found.iter().flatten().copied().collect();
