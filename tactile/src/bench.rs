@@ -85,7 +85,7 @@ pub fn settings() -> Vec<Setting> {
             params: make(F, 4, R, H, true),
         },
         Setting {
-            name: "default, lost markers searched in the whole frame",
+            name: "default, whole-frame search of lost markers",
             params: {
                 let mut p = Params::default();
                 p.markers.local_search = false;
@@ -510,7 +510,7 @@ mod tests {
             // The default setting and the whole-frame search of lost
             // markers, one after the other in one run.
             Some("local") => vec![
-                "default, lost markers searched in the whole frame",
+                "default, whole-frame search of lost markers",
                 "default: fast s8, relative, skip+ROI, tracking",
             ],
             _ => vec!["default: fast s8, relative, skip+ROI, tracking"],
