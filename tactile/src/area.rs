@@ -410,12 +410,21 @@ pub const LATTICE_MAX_GAP: f64 = 1.5;
 /// pitches (the outer markers' own extent plus a margin for their motion).
 pub const HULL_GROWTH_PITCH: f64 = 0.6;
 
+/// How far beyond the automatic area the outer markers may be pushed by a
+/// contact, in pitches: a deep tap on a real TacTip moves the outer ring
+/// up to 1.5 pitches beyond the rest lattice's hull (the public
+/// `tactile_data_shear` taps of 4-5 mm), 0.9 beyond the area. See
+/// [`crate::markers::RimBand`].
+pub const RIM_TRAVEL_PITCH: f64 = 1.0;
+
 /// The sensing area from the rest markers: the convex hull of the lattice
-/// markers ([`lattice_members`]), grown outwards by [`HULL_GROWTH_PITCH`]
-/// times `pitch_px`. `None` with fewer than 3 lattice markers.
+/// markers ([`lattice_members`]), grown outwards by `growth_pitch` times
+/// `pitch_px` ([`HULL_GROWTH_PITCH`] for the area itself). `None` with
+/// fewer than 3 lattice markers.
 pub fn from_lattice(
     points: &[PointPx],
     pitch_px: f64,
+    growth_pitch: f64,
     width: usize,
     height: usize,
 ) -> Option<SensingArea> {
@@ -429,7 +438,7 @@ pub fn from_lattice(
     }
     let (sx, sy) = hull.iter().fold((0.0, 0.0), |(a, b), p| (a + p.x, b + p.y));
     let c = PointPx::new(sx / hull.len() as f64, sy / hull.len() as f64);
-    let grow = HULL_GROWTH_PITCH * pitch_px;
+    let grow = growth_pitch * pitch_px;
     let grown: Vec<PointPx> = hull
         .iter()
         .map(|p| {
@@ -531,7 +540,7 @@ mod tests {
         let kept = lattice_members(&pts);
         assert_eq!(kept.len(), n, "every lattice marker and no housing blob");
         assert!(kept.iter().all(|&i| i < n));
-        let area = from_lattice(&pts, 15.0, 640, 480).unwrap();
+        let area = from_lattice(&pts, 15.0, HULL_GROWTH_PITCH, 640, 480).unwrap();
         assert!(pts[..n].iter().all(|&p| area.contains(p)));
         assert!(outside.iter().all(|&p| !area.contains(p)));
     }

@@ -12,7 +12,7 @@
 use crate::area::{self, AreaError, SensingArea, WorkToInput};
 use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
-use crate::markers::{self, Detector, MarkerError};
+use crate::markers::{self, Detector, MarkerError, RimBand};
 use crate::params::Params;
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
@@ -120,8 +120,7 @@ pub fn calibrate_mapped(
     let mut detector = markers::auto_detector(first, &params.markers)?;
     detector.area = given.clone();
     let cal = finish(
-        w,
-        h,
+        first,
         detector.clone(),
         stable_markers(rest, &detector),
         given.clone(),
@@ -136,8 +135,7 @@ pub fn calibrate_mapped(
     } else {
         detector.surface = cal.surface;
         finish(
-            w,
-            h,
+            first,
             detector.clone(),
             stable_markers(rest, &detector),
             given.clone(),
@@ -360,7 +358,7 @@ pub fn calibrate_from_frames(
             PointPx::new(x, y)
         })
         .collect();
-    let mut cal = finish(w, h, detector, stable, given, params, map)?;
+    let mut cal = finish(&median, detector, stable, given, params, map)?;
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     Ok(cal)
 }
@@ -383,11 +381,10 @@ fn median_image(frames: &[&GreyFrame]) -> GreyFrame {
 }
 
 /// From the stable rest markers: the sensing area (given, or found from
-/// the lattice), the markers inside it, the pitch, the search window and
-/// the density reference.
+/// the lattice, with its rim band measured on `rest`), the markers inside
+/// it, the pitch, the search window and the density reference.
 fn finish(
-    w: usize,
-    h: usize,
+    rest: &GreyFrame,
     mut detector: Detector,
     stable: Vec<PointPx>,
     given: Option<SensingArea>,
@@ -399,10 +396,15 @@ fn finish(
             found: stable.len(),
         });
     }
-    let area = match given {
-        Some(a) => a,
-        None => area::from_lattice(&stable, median_spacing(&stable), w, h)
-            .unwrap_or_else(|| SensingArea::whole(w, h)),
+    let (w, h) = (rest.width(), rest.height());
+    let spacing_px = median_spacing(&stable);
+    let lattice = |growth: f64| area::from_lattice(&stable, spacing_px, growth, w, h);
+    let (area, outer) = match given {
+        Some(a) => (a, None),
+        None => match lattice(area::HULL_GROWTH_PITCH) {
+            Some(a) => (a, lattice(area::HULL_GROWTH_PITCH + area::RIM_TRAVEL_PITCH)),
+            None => (SensingArea::whole(w, h), None),
+        },
     };
     let rest_markers: Vec<PointPx> = stable.into_iter().filter(|&p| area.contains(p)).collect();
     if rest_markers.len() < MIN_REST_MARKERS {
@@ -416,6 +418,7 @@ fn finish(
     detector.cell_px = ((pitch_px / detector.bin as f64).round() as usize).max(4);
     detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
     detector.area = Some(area);
+    detector.rim = outer.map(|outer| rim_band(rest, &detector, outer, pitch_px));
     let density = DensitySetup {
         width: w,
         height: h,
@@ -440,6 +443,46 @@ fn finish(
         rest_contrast: Vec::new(),
         gaps_px: Vec::new(),
     })
+}
+
+/// A detection in the rim band this close to a blob the rest frame has
+/// there is that blob, in pitches ([`markers::RimBand::clear_px`]).
+pub const RIM_FIXED_CLEAR_PITCH: f64 = 0.5;
+
+/// The rim band of an automatic area (`detector.area`) out to `outer`: the
+/// blobs the rest frame has in it (the housing's), and the rest markers'
+/// size.
+fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea, pitch_px: f64) -> RimBand {
+    let probe = Detector {
+        area: Some(outer.clone()),
+        rim: None,
+        ..detector.clone()
+    };
+    let found = markers::detect(rest, &probe).list;
+    let inside = |p: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(p));
+    let fixed_px = found
+        .iter()
+        .map(|m| m.pos)
+        .filter(|&p| !inside(p))
+        .collect();
+    let mut sizes: Vec<f32> = found
+        .iter()
+        .filter(|m| inside(m.pos))
+        .map(|m| m.area_px)
+        .collect();
+    let median = if sizes.is_empty() {
+        f32::NAN
+    } else {
+        let k = sizes.len() / 2;
+        *sizes.select_nth_unstable_by(k, f32::total_cmp).1
+    };
+    let (lo, hi) = markers::SIZE_RANGE;
+    RimBand {
+        outer,
+        fixed_px,
+        clear_px: RIM_FIXED_CLEAR_PITCH * pitch_px,
+        pin_area_px: [lo * median, hi * median],
+    }
 }
 
 /// A place is a gap when every rest marker around is further than this
@@ -699,6 +742,86 @@ mod tests {
         let r = p.run(&rest_frame(&sensor, 5).image).unwrap();
         assert_eq!(r.markers.len(), rest.markers.len());
         assert!(r.contact.is_none(), "{:?}", r.contact);
+    }
+
+    #[test]
+    fn the_rim_band_keeps_pins_pushed_out_and_drops_the_housing() {
+        // A disc of pins (pitch 20 px) and a saturated LED on the housing
+        // just outside it; in the frame a deep tap has pushed the outer
+        // pins 0.9 pitch outwards, out of the area, and a dust speck and a
+        // pin-sized blob have appeared there.
+        let (w, h, pitch) = (640, 480, 20.0);
+        let c = PointPx::new(320.0, 240.0);
+        let at = |r: f64, deg: f64| {
+            let a = deg.to_radians();
+            PointPx::new(c.x + r * a.cos(), c.y + r * a.sin())
+        };
+        let (led, stray, speck) = (at(206.0, 30.0), at(190.0, 150.0), at(200.0, 270.0));
+        let pushed = |p: PointPx| {
+            let (dx, dy) = (p.x - c.x, p.y - c.y);
+            let r = dx.hypot(dy);
+            let k = if r > 160.0 {
+                (r + 0.9 * pitch) / r
+            } else {
+                1.0
+            };
+            PointPx::new(c.x + k * dx, c.y + k * dy)
+        };
+        let near = |p: PointPx, q: PointPx, d: f64| (p.x - q.x).hypot(p.y - q.y) < d;
+        let pins: Vec<PointPx> = test_fixtures::hex_points(w, h, pitch)
+            .into_iter()
+            .filter(|p| near(*p, c, 181.0))
+            .filter(|p| {
+                [led, stray, speck]
+                    .iter()
+                    .all(|q| !near(pushed(*p), *q, 14.0))
+            })
+            .collect();
+        let spot = |p: PointPx| (p, 3.0, 150.0);
+        let led_spot = (led, 5.0, 900.0);
+        let rest_spots: Vec<_> = pins.iter().map(|&p| spot(p)).chain([led_spot]).collect();
+        let rest = test_fixtures::spots_frame(w, h, 30.0, &rest_spots);
+        let moved: Vec<PointPx> = pins.iter().map(|&p| pushed(p)).collect();
+        let frame_spots: Vec<_> = moved
+            .iter()
+            .map(|&p| spot(p))
+            .chain([led_spot, spot(stray), (speck, 1.0, 120.0)])
+            .collect();
+        let frame = test_fixtures::spots_frame(w, h, 30.0, &frame_spots);
+        // Noise-free small spots on a flat background: the gaps between
+        // them would pass for a dark-marker lattice too.
+        let mut params = Params::default();
+        params.markers.polarity = crate::params::Polarity::Bright;
+        let cal = calibrate(&[rest.clone()], &params).unwrap();
+        assert_eq!(cal.rest_markers.len(), pins.len());
+        let area = cal.detector.area.as_ref().unwrap();
+        let outside = moved.iter().filter(|p| !area.contains(**p)).count();
+        assert!(outside >= 20, "{outside} pins pushed out of the area");
+        let rim = cal.detector.rim.clone().unwrap();
+        assert!(!area.contains(stray) && rim.outer.contains(stray));
+        let found = |det: &Detector, image: &GreyFrame| markers::detect(image, det).positions();
+        assert_eq!(
+            found(&cal.detector, &rest).len(),
+            pins.len(),
+            "the LED kept"
+        );
+        // The pin-sized blob is a pin pushed out, for all the band can
+        // tell; where the rest had a blob, it is that blob.
+        let with_stray: Vec<PointPx> = moved.iter().copied().chain([stray]).collect();
+        let mut fixed = cal.detector.clone();
+        fixed.rim.as_mut().unwrap().fixed_px.push(stray);
+        for (det, truth) in [(&cal.detector, &with_stray), (&fixed, &moved)] {
+            let found = found(det, &frame);
+            assert_eq!(
+                test_fixtures::match_points(&found, truth, 1.5).len(),
+                truth.len()
+            );
+            assert_eq!(found.len(), truth.len(), "the LED or the speck kept");
+        }
+        // Without the band the pushed pins are lost.
+        let mut no_rim = cal.detector.clone();
+        no_rim.rim = None;
+        assert!(found(&no_rim, &frame).len() <= moved.len() - outside);
     }
 
     #[test]

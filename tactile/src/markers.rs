@@ -168,6 +168,9 @@ pub struct Detector {
     /// Keep only markers inside this area (`None`: all). The calibration
     /// sets it (see [`crate::area`]).
     pub area: Option<SensingArea>,
+    /// Where the outer markers may be pushed beyond `area` (`None`: nowhere;
+    /// the calibration sets it with an area found from the rest lattice).
+    pub rim: Option<RimBand>,
     /// Dark markers on a bright skin (GelSight-type dots): the frame is
     /// inverted before detection.
     pub dark: bool,
@@ -176,6 +179,58 @@ pub struct Detector {
     /// rings' thin ellipses give a weaker blob response). The calibration
     /// sets it.
     pub surface: Surface,
+}
+
+/// The band beyond an automatic sensing area into which a contact pushes
+/// the outer markers (a deep tap on a real TacTip moves its outer ring
+/// nearly a pitch past the area; see [`crate::area::RIM_TRAVEL_PITCH`]).
+/// The housing's own blobs sit there too (LEDs, dust, reflections on a
+/// bezel), but they do not move: a detection in the band is kept only when
+/// it is the size of a pin and no blob was found within `clear_px` of it on
+/// the rest frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RimBand {
+    /// The sensing area and the band together.
+    pub outer: SensingArea,
+    /// Blobs found in the band on the rest frame, working px.
+    pub fixed_px: Vec<PointPx>,
+    /// A detection this close to one of `fixed_px` is that blob, px.
+    pub clear_px: f64,
+    /// Effective area range of a pin, px^2 ([`SIZE_RANGE`] times the rest
+    /// markers' median).
+    pub pin_area_px: [f32; 2],
+}
+
+impl Detector {
+    /// Whether a marker may lie at `p`: inside the sensing area or its rim
+    /// band (followed markers; a search's first guess).
+    fn may_hold(&self, p: PointPx) -> bool {
+        match (&self.area, &self.rim) {
+            (None, _) => true,
+            (Some(a), None) => a.contains(p),
+            (Some(a), Some(rim)) => a.contains(p) || rim.outer.contains(p),
+        }
+    }
+
+    /// Whether a searched marker at `p` with effective area `area_px` is
+    /// kept: inside the sensing area, or a pin-sized blob in the rim band
+    /// away from the housing's fixed blobs ([`RimBand`]).
+    fn keeps(&self, p: PointPx, area_px: f32) -> bool {
+        match (&self.area, &self.rim) {
+            (None, _) => true,
+            (Some(a), _) if a.contains(p) => true,
+            (Some(_), None) => false,
+            (Some(_), Some(rim)) => {
+                let clear2 = rim.clear_px * rim.clear_px;
+                rim.outer.contains(p)
+                    && (rim.pin_area_px[0]..=rim.pin_area_px[1]).contains(&area_px)
+                    && rim
+                        .fixed_px
+                        .iter()
+                        .all(|q| (q.x - p.x).powi(2) + (q.y - p.y).powi(2) > clear2)
+            }
+        }
+    }
 }
 
 /// A local range below this fraction of the frame's typical (75th
@@ -229,6 +284,24 @@ fn detect_in(
     };
     let lobe = det.lobe_px.max(3) | 1;
     let margin = (3 * lobe - 1) / 2;
+    // Where the window reaches the frame's edge, the detection image is
+    // mirrored outwards by the filter margin and one pixel, so that a pin
+    // the edge cuts (a deep tap pushes the outer ring out of view) is still
+    // a blob, with its peak on either side of the edge.
+    let at_edge = |at: bool, n: usize| if at { (margin + 1).min(n) } else { 0 };
+    let pad = [
+        at_edge(x0 == 0, w),
+        at_edge(y0 == 0, h),
+        at_edge(x1 == fw, w),
+        at_edge(y1 == fh, h),
+    ];
+    let padded;
+    let (img, w, h) = if pad == [0; 4] || w == 0 || h == 0 {
+        (img, w, h)
+    } else {
+        padded = mirror_pad(img, w, h, pad);
+        (&padded[..], w + pad[0] + pad[2], h + pad[1] + pad[3])
+    };
     if w <= 2 * margin + 2 || h <= 2 * margin + 2 {
         return Vec::new();
     }
@@ -236,7 +309,11 @@ fn detect_in(
     let ii = integral(img, w, h);
     let mut taken = Occupancy::new(frame.width(), frame.height());
     let mut list = Vec::new();
+    // A padded pixel's place is the nearest one of the window.
+    let (inner_w, inner_h) = (w - pad[0] - pad[2], h - pad[1] - pad[3]);
     let to_work = |x: usize, y: usize| {
+        let x = x.saturating_sub(pad[0]).min(inner_w - 1);
+        let y = y.saturating_sub(pad[1]).min(inner_h - 1);
         PointPx::new(
             (x0 + x * bin) as f64 + (bin as f64 - 1.0) / 2.0,
             (y0 + y * bin) as f64 + (bin as f64 - 1.0) / 2.0,
@@ -251,7 +328,7 @@ fn detect_in(
         if strength < det.min_rel_strength * range * det.surface.foreshortening(guess) as f32 {
             continue;
         }
-        if det.area.as_ref().is_some_and(|a| !a.contains(guess)) {
+        if !det.may_hold(guess) {
             continue;
         }
         // A saturated marker's candidate is its plateau's first pixel, off
@@ -266,7 +343,7 @@ fn detect_in(
             }
         });
         if let Some((pos, _, area_px)) = refined {
-            if det.area.as_ref().is_some_and(|a| !a.contains(pos)) {
+            if !det.keeps(pos, area_px) {
                 continue;
             }
             if taken.claim(pos, DUPLICATE_PX, &list) {
@@ -688,7 +765,7 @@ fn follow_each(
     for (k, &p) in near.iter().enumerate() {
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
         let kept = follow_one(frame, p, radius_px, det.min_contrast, reach_px)
-            .filter(|&(at, _, _)| det.area.as_ref().is_none_or(|a| a.contains(at)));
+            .filter(|&(at, _, _)| det.may_hold(at));
         if kept.is_none() {
             lost += 1;
             if lost > max_lost {
@@ -1119,7 +1196,8 @@ fn detector_for(
             let mut best = (3, f32::MIN);
             for &l in AUTO_LOBES_PX.iter().filter(|&&l| 3 * l + 2 < w.min(h)) {
                 let map = strength_map(rest.data(), w, h, l, 2);
-                let score = percentile(map.into_iter().filter(|&s| s > 0.0).collect(), 0.98);
+                let cols = (w - (3 * l - 1) / 2 * 2).div_ceil(2);
+                let score = percentile(map_peaks(&map, cols), SCALE_PEAK_QUANTILE);
                 if score > best.1 {
                     best = (l, score);
                 }
@@ -1148,6 +1226,7 @@ fn detector_for(
         cell_px: ((CELL_RADII * radius_px) / bin as f64).round().max(4.0) as usize,
         window_px: None,
         area: None,
+        rim: None,
         dark: false,
         surface: Surface::Flat,
     };
@@ -1217,6 +1296,30 @@ fn bin2(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> 
     out
 }
 
+/// `img` (`w x h`) mirrored outwards by `[left, top, right, bottom]` px
+/// (about its edge pixels: `..., 1, 0 | 0, 1, ...`); left and right at
+/// most `w`, top and bottom at most `h`.
+fn mirror_pad(img: &[u8], w: usize, h: usize, pad: [usize; 4]) -> Vec<u8> {
+    let [l, t, r, b] = [pad[0].min(w), pad[1].min(h), pad[2].min(w), pad[3].min(h)];
+    let mut out = Vec::with_capacity((w + l + r) * (h + t + b));
+    for y in 0..h + t + b {
+        // Rows above the image mirror rows 0, 1, ...; rows below it the
+        // last, the one before, ...
+        let sy = if y < t {
+            t - 1 - y
+        } else if y - t >= h {
+            2 * h - 1 - (y - t)
+        } else {
+            y - t
+        };
+        let row = &img[sy * w..(sy + 1) * w];
+        out.extend(row[..l].iter().rev());
+        out.extend_from_slice(row);
+        out.extend(row[w - r..].iter().rev());
+    }
+    out
+}
+
 /// Copy of the `w x h` frame region starting at `(x0, y0)`.
 fn crop(frame: &GreyFrame, x0: usize, y0: usize, w: usize, h: usize) -> Vec<u8> {
     let fw = frame.width();
@@ -1251,6 +1354,30 @@ pub fn integral(img: &[u8], w: usize, h: usize) -> Vec<u32> {
 fn strength_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
     let mut out = determinant_map(img, w, h, lobe, step);
     out.iter_mut().for_each(|v| *v = v.sqrt());
+    out
+}
+
+/// The automatic scale is the lobe whose blob peaks ([`map_peaks`]) reach
+/// the highest strength at this quantile. Per peak, not per pixel: one
+/// large saturated LED covers more pixels of a large lobe's map than a
+/// hundred pins, but it is one peak among them.
+const SCALE_PEAK_QUANTILE: f64 = 0.9;
+
+/// The values of `map` (row-major, `cols` wide) at its positive 3x3
+/// maxima (at least each of the 8 neighbours), the map's edge left out.
+fn map_peaks(map: &[f32], cols: usize) -> Vec<f32> {
+    let rows = if cols == 0 { 0 } else { map.len() / cols };
+    let mut out = Vec::new();
+    for y in 1..rows.saturating_sub(1) {
+        for x in 1..cols - 1 {
+            let v = map[y * cols + x];
+            if v > 0.0
+                && (y - 1..=y + 1).all(|yy| (x - 1..=x + 1).all(|xx| map[yy * cols + xx] <= v))
+            {
+                out.push(v);
+            }
+        }
+    }
     out
 }
 
@@ -1554,6 +1681,52 @@ mod tests {
     }
 
     #[test]
+    fn mirror_padding_reflects_about_the_edge_pixels() {
+        let img: Vec<u8> = (0..6).collect(); // 3 x 2: [0 1 2; 3 4 5]
+        let padded = mirror_pad(&img, 3, 2, [2, 1, 1, 2]);
+        // Columns -2..4 -> 1 0 | 0 1 2 | 2; rows -1..4 -> 0 | 0 1 | 1 0.
+        let row = |r: &[u8]| vec![r[1], r[0], r[0], r[1], r[2], r[2]];
+        let (r0, r1) = (row(&img[..3]), row(&img[3..]));
+        let expected: Vec<u8> = [&r0, &r0, &r1, &r1, &r0]
+            .into_iter()
+            .flatten()
+            .copied()
+            .collect();
+        assert_eq!(padded, expected);
+        // Pads larger than the image are cut to its size.
+        assert_eq!(mirror_pad(&img, 3, 2, [9, 9, 0, 0]).len(), 6 * 4);
+    }
+
+    #[test]
+    fn pins_cut_by_the_frame_edge_are_found() {
+        let (w, h, pitch) = (320, 240, 16.0);
+        let mut pins = test_fixtures::hex_points(w, h, pitch);
+        // A deep tap pushes the outer pins to the edge: centres 0.5-2 px
+        // inside it, up to half of each pin cut off.
+        let cut: Vec<PointPx> = (0..6)
+            .map(|k| PointPx::new(0.5 + 0.3 * k as f64, 24.0 + 32.0 * k as f64))
+            .chain((0..6).map(|k| PointPx::new(40.0 + 48.0 * k as f64, 2.0 - 0.3 * k as f64)))
+            .collect();
+        pins.retain(|p| cut.iter().all(|q| (p.x - q.x).hypot(p.y - q.y) > pitch));
+        let spots: Vec<_> = pins.iter().chain(&cut).map(|&p| (p, 2.5, 150.0)).collect();
+        let frame = test_fixtures::spots_frame(w, h, 30.0, &spots);
+        let params = MarkerParams {
+            polarity: Polarity::Bright,
+            ..MarkerParams::default()
+        };
+        let det = auto_detector(&frame, &params).unwrap();
+        let found = detect(&frame, &det).positions();
+        for q in &cut {
+            let d = found
+                .iter()
+                .map(|p| (p.x - q.x).hypot(p.y - q.y))
+                .fold(f64::INFINITY, f64::min);
+            assert!(d < 2.0, "the pin at {q:?}: nearest marker {d:.2} px away");
+        }
+        assert_eq!(found.len(), pins.len() + cut.len());
+    }
+
+    #[test]
     fn auto_scale_follows_marker_size() {
         let mut small = Category::Nominal.sensor(640, 480, 3);
         small.marker_diameter_px = 4.0;
@@ -1658,6 +1831,7 @@ mod tests {
                 cell_px: 8,
                 window_px: None,
                 area: None,
+                rim: None,
                 dark: false,
                 surface: Surface::Flat,
             };

@@ -1,6 +1,7 @@
 //! Shared test fixtures: point grids, a calibrated nominal sensor, matching.
 
 use crate::calibrate::{self, Calibration};
+use crate::frame::GreyFrame;
 use crate::markers::{self, Detector};
 use crate::params::Params;
 use crate::synth::{rest_frame, Category, SynthFrame};
@@ -61,4 +62,37 @@ pub fn match_points(found: &[PointPx], truth: &[PointPx], radius: f64) -> Vec<(u
         }
     }
     out
+}
+
+/// A `w x h` frame of grey level `background` with Gaussian spots
+/// `(centre, sigma px, amplitude grey levels)` added (clipped to 0..=255).
+pub fn spots_frame(
+    w: usize,
+    h: usize,
+    background: f64,
+    spots: &[(PointPx, f64, f64)],
+) -> GreyFrame {
+    let mut data = vec![background; w * h];
+    for &(c, sigma, amplitude) in spots {
+        let reach = (4.0 * sigma).ceil();
+        let (x0, x1) = (
+            (c.x - reach).max(0.0) as usize,
+            ((c.x + reach) as usize).min(w - 1),
+        );
+        let (y0, y1) = (
+            (c.y - reach).max(0.0) as usize,
+            ((c.y + reach) as usize).min(h - 1),
+        );
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let r2 = (x as f64 - c.x).powi(2) + (y as f64 - c.y).powi(2);
+                data[y * w + x] += amplitude * (-r2 / (2.0 * sigma * sigma)).exp();
+            }
+        }
+    }
+    let bytes = data
+        .iter()
+        .map(|v| v.round().clamp(0.0, 255.0) as u8)
+        .collect();
+    GreyFrame::new(w, h, bytes).expect("w * h bytes")
 }

@@ -262,6 +262,7 @@ proptest! {
             cell_px: 8,
             window_px: None,
             area: None,
+            rim: None,
             dark: false,
             surface: dexitac_tactile::surface::Surface::Flat,
         };
