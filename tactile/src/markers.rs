@@ -320,7 +320,9 @@ fn detect_in(
         )
     };
     for (x, y, peak) in bright_peaks(img, w, h, margin, &env, det.min_level_ratio) {
-        let (x, y) = plateau_centre(img, w, h, x, y, margin);
+        let (_, range) = env.at(x, y);
+        let tol = (PLATEAU_TOLERANCE * range).min(255.0) as u8;
+        let (x, y) = plateau_centre(img, (w, h), (x, y), margin, tol, 3 * lobe);
         let (lo, range) = env.at(x, y);
         let d = determinant_at(&ii, w + 1, x, y, lobe);
         let strength = d.sqrt();
@@ -873,31 +875,52 @@ pub const FOLLOW_MAX_LOST: f64 = 0.01;
 /// [`follow`].
 pub const FOLLOW_MIN_CONTRAST: f32 = 0.3;
 
-/// The middle of the flat top that starts at candidate `(x, y)` (a
-/// saturated or binarised marker's maxima form a plateau, and its first
-/// pixel in raster order sits on its upper-left edge, where the determinant
-/// is weak): the middle of its first row, then the middle of the column
-/// down from there; kept `margin` px inside the image.
+/// The middle of the flat top that holds candidate `(x, y)`: the pixels
+/// within `tol` grey levels of it. A saturated or binarised marker's maxima
+/// form a plateau, and its first pixel in raster order sits on its
+/// upper-left edge, where the determinant is weak; under a light gradient
+/// or vignetting the plateau tilts and its maximum is a pixel anywhere on
+/// its rim. The middle of the run along the row through the candidate,
+/// then of the column through that; each run at most `max_run` px either
+/// way and kept `margin` px inside the image.
 fn plateau_centre(
     img: &[u8],
-    w: usize,
-    h: usize,
-    x: usize,
-    y: usize,
+    (w, h): (usize, usize),
+    (x, y): (usize, usize),
     margin: usize,
+    tol: u8,
+    max_run: usize,
 ) -> (usize, usize) {
-    let v = img[y * w + x];
-    let row = &img[y * w..(y + 1) * w];
-    let run_x = row[x..w - margin].iter().take_while(|&&p| p == v).count();
-    if run_x <= 1 && img[(y + 1) * w + x] != v {
+    let (lo_x, hi_x) = (margin.max(1), w - margin.max(1) - 1);
+    let (lo_y, hi_y) = (margin.max(1), h - margin.max(1) - 1);
+    if x < lo_x || y < lo_y || x > hi_x || y > hi_y {
         return (x, y);
     }
-    let xm = x + (run_x.max(1) - 1) / 2;
-    let run_y = (y..h - margin)
-        .take_while(|&yy| img[yy * w + xm] == v)
-        .count();
-    (xm, y + (run_y.max(1) - 1) / 2)
+    let floor = img[y * w + x].saturating_sub(tol);
+    let on = |xx: usize, yy: usize| img[yy * w + xx] >= floor;
+    if !(on(x + 1, y) || on(x, y + 1) || on(x - 1, y) || on(x, y - 1)) {
+        return (x, y);
+    }
+    // The middle of the run through `at` along one axis (`on_at(k)`: the
+    // pixel `k` along it is on the plateau).
+    let middle = |at: usize, lo: usize, hi: usize, on_at: &dyn Fn(usize) -> bool| {
+        let (mut a, mut b) = (at, at);
+        while a > lo && at - a < max_run && on_at(a - 1) {
+            a -= 1;
+        }
+        while b < hi && b - at < max_run && on_at(b + 1) {
+            b += 1;
+        }
+        (a + b) / 2
+    };
+    // Any chord's middle is a disc's middle across it.
+    let xm = middle(x, lo_x, hi_x, &|k| on(k, y));
+    (xm, middle(y, lo_y, hi_y, &|k| on(xm, k)))
 }
+
+/// [`plateau_centre`]'s tolerance: this fraction of the local range (a
+/// binarised pin under vignetting of 0.55 varies by 3 % across itself).
+const PLATEAU_TOLERANCE: f32 = 0.05;
 
 /// The local light envelope: per cell, the darkest and brightest level over
 /// the cell and its 8 neighbours.
@@ -1724,6 +1747,41 @@ mod tests {
             assert!(d < 2.0, "the pin at {q:?}: nearest marker {d:.2} px away");
         }
         assert_eq!(found.len(), pins.len() + cut.len());
+    }
+
+    #[test]
+    fn binarised_pins_under_vignetting_and_a_gradient_are_found() {
+        // Flat-topped pins (a thresholded TacTip frame) whose light then
+        // falls off towards the corners and across the frame: each pin's
+        // top tilts, and its brightest pixel is on its rim.
+        let (w, h, pitch) = (420, 420, 18.0);
+        let pins = test_fixtures::hex_points(w, h, pitch);
+        let frame = |gain: &dyn Fn(f64, f64) -> f64| {
+            let data = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f64, (i / w) as f64);
+                    let on = pins.iter().any(|p| (p.x - x).hypot(p.y - y) <= 6.0);
+                    (if on { 255.0 * gain(x, y) } else { 0.0 }).round() as u8
+                })
+                .collect();
+            GreyFrame::new(w, h, data).unwrap()
+        };
+        let rest = frame(&|_, _| 1.0);
+        let lit = frame(&|x, y| {
+            let r2 = ((x - 210.0).powi(2) + (y - 210.0).powi(2)) / 297f64.powi(2);
+            (1.0 - 0.55 * r2) * (0.85 + 0.3 * x / w as f64)
+        });
+        let params = MarkerParams {
+            polarity: Polarity::Bright,
+            ..MarkerParams::default()
+        };
+        let det = auto_detector(&rest, &params).unwrap();
+        for image in [&rest, &lit] {
+            let found = detect(image, &det).positions();
+            let matched = test_fixtures::match_points(&found, &pins, 1.0);
+            assert_eq!(matched.len(), pins.len(), "{} found", found.len());
+            assert_eq!(found.len(), pins.len());
+        }
     }
 
     #[test]
