@@ -3,9 +3,12 @@
 //! reflections) are dropped before density and tracking.
 //!
 //! The area is either found from the rest frame ([`from_lattice`]: the
-//! convex hull of the markers that sit in a regular lattice, grown by half a
-//! pitch) or given in the sensor config as a circle, a rounded rectangle, a
-//! polygon or a mask image ([`AreaSpec`], in input-image pixels). Either way
+//! convex hull of the markers that sit in a regular lattice, grown by
+//! [`HULL_GROWTH_PITCH`], with a band [`RIM_TRAVEL_PITCH`] wide around it
+//! where the outer markers a contact pushes out are kept, see
+//! [`crate::markers::RimBand`]) or given in the sensor config as a circle, a
+//! rounded rectangle, a polygon or a mask image ([`AreaSpec`], in
+//! input-image pixels). Either way
 //! it is stored as row spans of the working frame, so the test of a point
 //! is a lookup of its row and a scan of that row's (usually one) spans.
 
