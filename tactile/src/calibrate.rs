@@ -418,7 +418,7 @@ fn finish(
     detector.cell_px = ((pitch_px / detector.bin as f64).round() as usize).max(4);
     detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
     detector.area = Some(area);
-    detector.rim = outer.map(|outer| rim_band(rest, &detector, outer, pitch_px));
+    detector.rim = outer.map(|outer| rim_band(rest, &detector, outer));
     let density = DensitySetup {
         width: w,
         height: h,
@@ -445,43 +445,60 @@ fn finish(
     })
 }
 
-/// A detection in the rim band this close to a blob the rest frame has
-/// there is that blob, in pitches ([`markers::RimBand::clear_px`]).
-pub const RIM_FIXED_CLEAR_PITCH: f64 = 0.5;
-
-/// The rim band of an automatic area (`detector.area`) out to `outer`: the
-/// blobs the rest frame has in it (the housing's), and the rest markers'
-/// size.
-fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea, pitch_px: f64) -> RimBand {
+/// The rim band of an automatic area (`detector.area`) out to `outer`: where
+/// the rest frame is bright in it, and the rest markers' size. Bright: at
+/// least half way from the skin (the 10th percentile of the area's grey
+/// levels) to the rest markers' centres (their median grey level).
+fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea) -> RimBand {
     let probe = Detector {
         area: Some(outer.clone()),
         rim: None,
         ..detector.clone()
     };
-    let found = markers::detect(rest, &probe).list;
-    let inside = |p: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(p));
-    let fixed_px = found
-        .iter()
-        .map(|m| m.pos)
-        .filter(|&p| !inside(p))
-        .collect();
-    let mut sizes: Vec<f32> = found
-        .iter()
-        .filter(|m| inside(m.pos))
-        .map(|m| m.area_px)
-        .collect();
-    let median = if sizes.is_empty() {
-        f32::NAN
+    let inverted;
+    let positive = if detector.dark {
+        inverted = rest.inverted();
+        &inverted
     } else {
-        let k = sizes.len() / 2;
-        *sizes.select_nth_unstable_by(k, f32::total_cmp).1
+        rest
     };
+    let inside = |p: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(p));
+    let pins: Vec<markers::Marker> = markers::detect(rest, &probe)
+        .list
+        .into_iter()
+        .filter(|m| inside(m.pos))
+        .collect();
+    let grey = |x: f64, y: f64| positive.get((x + 0.5) as i64, (y + 0.5) as i64) as f64;
+    let quantile = |mut v: Vec<f64>, q: f64| {
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        let k = ((v.len() - 1) as f64 * q) as usize;
+        *v.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let pin_level = quantile(pins.iter().map(|m| grey(m.pos.x, m.pos.y)).collect(), 0.5);
+    let (w, h) = (rest.width(), rest.height());
+    // Every 7th pixel of the area is enough for a percentile.
+    let skin = quantile(
+        (0..w * h)
+            .step_by(7)
+            .map(|i| ((i % w) as f64, (i / w) as f64))
+            .filter(|&(x, y)| inside(PointPx::new(x, y)))
+            .map(|(x, y)| grey(x, y))
+            .collect(),
+        0.1,
+    );
+    let cut = skin + 0.5 * (pin_level - skin);
+    let bright_at_rest = SensingArea::from_fn(w, h, |x, y| {
+        let p = PointPx::new(x, y);
+        outer.contains(p) && !inside(p) && grey(x, y) >= cut
+    });
+    let size = quantile(pins.iter().map(|m| m.area_px as f64).collect(), 0.5) as f32;
     let (lo, hi) = markers::SIZE_RANGE;
     RimBand {
         outer,
-        fixed_px,
-        clear_px: RIM_FIXED_CLEAR_PITCH * pitch_px,
-        pin_area_px: [lo * median, hi * median],
+        bright_at_rest,
+        pin_area_px: [lo * size, hi * size],
     }
 }
 
@@ -756,7 +773,7 @@ mod tests {
             let a = deg.to_radians();
             PointPx::new(c.x + r * a.cos(), c.y + r * a.sin())
         };
-        let (led, stray, speck) = (at(206.0, 30.0), at(190.0, 150.0), at(200.0, 270.0));
+        let (led, stray, speck) = (at(196.0, 30.0), at(190.0, 150.0), at(200.0, 270.0));
         let pushed = |p: PointPx| {
             let (dx, dy) = (p.x - c.x, p.y - c.y);
             let r = dx.hypot(dy);
@@ -772,9 +789,9 @@ mod tests {
             .into_iter()
             .filter(|p| near(*p, c, 181.0))
             .filter(|p| {
-                [led, stray, speck]
+                [(led, 25.0), (stray, 14.0), (speck, 14.0)]
                     .iter()
-                    .all(|q| !near(pushed(*p), *q, 14.0))
+                    .all(|&(q, d)| !near(pushed(*p), q, d))
             })
             .collect();
         let spot = |p: PointPx| (p, 3.0, 150.0);
@@ -792,13 +809,14 @@ mod tests {
         // them would pass for a dark-marker lattice too.
         let mut params = Params::default();
         params.markers.polarity = crate::params::Polarity::Bright;
-        let cal = calibrate(&[rest.clone()], &params).unwrap();
+        let cal = calibrate(std::slice::from_ref(&rest), &params).unwrap();
         assert_eq!(cal.rest_markers.len(), pins.len());
         let area = cal.detector.area.as_ref().unwrap();
         let outside = moved.iter().filter(|p| !area.contains(**p)).count();
         assert!(outside >= 20, "{outside} pins pushed out of the area");
         let rim = cal.detector.rim.clone().unwrap();
         assert!(!area.contains(stray) && rim.outer.contains(stray));
+        assert!(rim.bright_at_rest.contains(led) && !rim.bright_at_rest.contains(stray));
         let found = |det: &Detector, image: &GreyFrame| markers::detect(image, det).positions();
         assert_eq!(
             found(&cal.detector, &rest).len(),
@@ -806,11 +824,12 @@ mod tests {
             "the LED kept"
         );
         // The pin-sized blob is a pin pushed out, for all the band can
-        // tell; where the rest had a blob, it is that blob.
+        // tell; where the rest was bright, it is the housing's.
         let with_stray: Vec<PointPx> = moved.iter().copied().chain([stray]).collect();
-        let mut fixed = cal.detector.clone();
-        fixed.rim.as_mut().unwrap().fixed_px.push(stray);
-        for (det, truth) in [(&cal.detector, &with_stray), (&fixed, &moved)] {
+        let mut lit = cal.detector.clone();
+        lit.rim.as_mut().unwrap().bright_at_rest =
+            SensingArea::from_fn(w, h, |x, y| near(PointPx::new(x, y), stray, 4.0));
+        for (det, truth) in [(&cal.detector, &with_stray), (&lit, &moved)] {
             let found = found(det, &frame);
             assert_eq!(
                 test_fixtures::match_points(&found, truth, 1.5).len(),

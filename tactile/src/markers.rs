@@ -185,17 +185,18 @@ pub struct Detector {
 /// the outer markers (a deep tap on a real TacTip moves its outer ring
 /// nearly a pitch past the area; see [`crate::area::RIM_TRAVEL_PITCH`]).
 /// The housing's own blobs sit there too (LEDs, dust, reflections on a
-/// bezel), but they do not move: a detection in the band is kept only when
-/// it is the size of a pin and no blob was found within `clear_px` of it on
-/// the rest frame.
+/// bezel, debris), but they do not move, and where they are the rest frame
+/// is bright; a pushed-out pin lands where the rest frame shows dark skin.
+/// A detection in the band is kept only when it is the size of a pin and
+/// the rest frame was dark where it lies.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RimBand {
     /// The sensing area and the band together.
     pub outer: SensingArea,
-    /// Blobs found in the band on the rest frame, working px.
-    pub fixed_px: Vec<PointPx>,
-    /// A detection this close to one of `fixed_px` is that blob, px.
-    pub clear_px: f64,
+    /// The band's pixels that are bright on the rest frame: at least half
+    /// way from the skin's level to the rest markers' (see
+    /// [`crate::calibrate`]).
+    pub bright_at_rest: SensingArea,
     /// Effective area range of a pin, px^2 ([`SIZE_RANGE`] times the rest
     /// markers' median).
     pub pin_area_px: [f32; 2],
@@ -214,20 +215,16 @@ impl Detector {
 
     /// Whether a searched marker at `p` with effective area `area_px` is
     /// kept: inside the sensing area, or a pin-sized blob in the rim band
-    /// away from the housing's fixed blobs ([`RimBand`]).
+    /// where the rest frame was dark ([`RimBand`]).
     fn keeps(&self, p: PointPx, area_px: f32) -> bool {
         match (&self.area, &self.rim) {
             (None, _) => true,
             (Some(a), _) if a.contains(p) => true,
             (Some(_), None) => false,
             (Some(_), Some(rim)) => {
-                let clear2 = rim.clear_px * rim.clear_px;
                 rim.outer.contains(p)
                     && (rim.pin_area_px[0]..=rim.pin_area_px[1]).contains(&area_px)
-                    && rim
-                        .fixed_px
-                        .iter()
-                        .all(|q| (q.x - p.x).powi(2) + (q.y - p.y).powi(2) > clear2)
+                    && !rim.bright_at_rest.contains(p)
             }
         }
     }
@@ -1389,7 +1386,7 @@ const SCALE_PEAK_QUANTILE: f64 = 0.9;
 /// The values of `map` (row-major, `cols` wide) at its positive 3x3
 /// maxima (at least each of the 8 neighbours), the map's edge left out.
 fn map_peaks(map: &[f32], cols: usize) -> Vec<f32> {
-    let rows = if cols == 0 { 0 } else { map.len() / cols };
+    let rows = map.len().checked_div(cols).unwrap_or(0);
     let mut out = Vec::new();
     for y in 1..rows.saturating_sub(1) {
         for x in 1..cols - 1 {
