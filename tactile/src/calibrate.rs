@@ -805,11 +805,7 @@ mod tests {
             .chain([led_spot, spot(stray), (speck, 1.0, 120.0)])
             .collect();
         let frame = test_fixtures::spots_frame(w, h, 30.0, &frame_spots);
-        // Noise-free small spots on a flat background: the gaps between
-        // them would pass for a dark-marker lattice too.
-        let mut params = Params::default();
-        params.markers.polarity = crate::params::Polarity::Bright;
-        let cal = calibrate(std::slice::from_ref(&rest), &params).unwrap();
+        let cal = calibrate(std::slice::from_ref(&rest), &Params::default()).unwrap();
         assert_eq!(cal.rest_markers.len(), pins.len());
         let area = cal.detector.area.as_ref().unwrap();
         let outside = moved.iter().filter(|p| !area.contains(**p)).count();
