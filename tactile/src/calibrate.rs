@@ -468,18 +468,11 @@ fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea) -> RimBan
         .into_iter()
         .filter(|m| inside(m.pos))
         .collect();
-    let grey = |x: f64, y: f64| positive.get((x + 0.5) as i64, (y + 0.5) as i64) as f64;
-    let quantile = |mut v: Vec<f64>, q: f64| {
-        if v.is_empty() {
-            return f64::NAN;
-        }
-        let k = ((v.len() - 1) as f64 * q) as usize;
-        *v.select_nth_unstable_by(k, f64::total_cmp).1
-    };
-    let pin_level = quantile(pins.iter().map(|m| grey(m.pos.x, m.pos.y)).collect(), 0.5);
+    let grey = |x: f64, y: f64| positive.get((x + 0.5) as i64, (y + 0.5) as i64) as f32;
+    let pin_level = markers::percentile(pins.iter().map(|m| grey(m.pos.x, m.pos.y)).collect(), 0.5);
     let (w, h) = (rest.width(), rest.height());
     // Every 7th pixel of the area is enough for a percentile.
-    let skin = quantile(
+    let skin = markers::percentile(
         (0..w * h)
             .step_by(7)
             .map(|i| ((i % w) as f64, (i / w) as f64))
@@ -493,7 +486,7 @@ fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea) -> RimBan
         let p = PointPx::new(x, y);
         outer.contains(p) && !inside(p) && grey(x, y) >= cut
     });
-    let size = quantile(pins.iter().map(|m| m.area_px as f64).collect(), 0.5) as f32;
+    let size = markers::percentile(pins.iter().map(|m| m.area_px).collect(), 0.5);
     let (lo, hi) = markers::SIZE_RANGE;
     RimBand {
         outer,
@@ -540,6 +533,7 @@ pub fn rest_gaps(
         })
         .collect();
     let step = 0.5 * pitch_px;
+    let inside = |q: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(q));
     let mut gaps = Vec::new();
     let mut y = y0 as f64 + step;
     while y < y1.min(h) as f64 {
@@ -548,7 +542,6 @@ pub fn rest_gaps(
             let p = PointPx::new(x, y);
             x += step;
             // A pitch inside the area (the lattice's own rim is no gap).
-            let inside = |q: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(q));
             let d = pitch_px;
             if ![(0.0, 0.0), (d, 0.0), (-d, 0.0), (0.0, d), (0.0, -d)]
                 .iter()

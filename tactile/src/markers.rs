@@ -1215,8 +1215,7 @@ fn detector_for(
         None => {
             let mut best = (3, f32::MIN);
             for &l in AUTO_LOBES_PX.iter().filter(|&&l| 3 * l + 2 < w.min(h)) {
-                let map = strength_map(rest.data(), w, h, l, 2);
-                let cols = (w - (3 * l - 1) / 2 * 2).div_ceil(2);
+                let (map, cols) = strength_map(rest.data(), w, h, l, 2);
                 let score = percentile(map_peaks(&map, cols), SCALE_PEAK_QUANTILE);
                 if score > best.1 {
                     best = (l, score);
@@ -1283,7 +1282,7 @@ const MIN_LEVEL_RATIO_RANGE: (f32, f32) = (0.15, 0.5);
 const CELL_RADII: f64 = 3.5;
 
 /// Value at quantile `q` (0..=1) of `v` (0 for an empty vector).
-fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
+pub(crate) fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
     if v.is_empty() {
         return 0.0;
     }
@@ -1370,11 +1369,12 @@ pub fn integral(img: &[u8], w: usize, h: usize) -> Vec<u32> {
     ii
 }
 
-/// Blob strength (see the module doc) every `step` pixels.
-fn strength_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
-    let mut out = determinant_map(img, w, h, lobe, step);
+/// Blob strength (see the module doc) every `step` pixels, and the map's
+/// width ([`determinant_map`]).
+fn strength_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> (Vec<f32>, usize) {
+    let (mut out, cols) = determinant_map(img, w, h, lobe, step);
     out.iter_mut().for_each(|v| *v = v.sqrt());
-    out
+    (out, cols)
 }
 
 /// The automatic scale is the lobe whose blob peaks ([`map_peaks`]) reach
@@ -1403,12 +1403,13 @@ fn map_peaks(map: &[f32], cols: usize) -> Vec<f32> {
 
 /// Determinant of the box Hessian of bright blobs (0 elsewhere, i.e. the
 /// square of the blob strength), every `step` pixels inside the border
-/// (sampled row-major, the border left out). Used by the scale search.
-fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> Vec<f32> {
+/// (sampled row-major, the border left out), and the map's width. Used by
+/// the scale search.
+fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> (Vec<f32>, usize) {
     let m = (3 * lobe - 1) / 2;
     let step = step.max(1);
     if w <= 2 * m + 1 || h <= 2 * m + 1 {
-        return Vec::new();
+        return (Vec::new(), 0);
     }
     let ii = integral(img, w, h);
     let s = w + 1;
@@ -1472,7 +1473,7 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
             }
         }
     }
-    values
+    (values, cols)
 }
 
 /// Half-maximum intensity centroid in a window around `guess` (large
