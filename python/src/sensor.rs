@@ -7,7 +7,7 @@
 use std::time::Instant;
 
 use numpy::PyArray2;
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyUserWarning, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyList;
 
@@ -206,6 +206,11 @@ impl Sensor {
         let cal = py
             .detach(|| calibrate::calibrate_mapped(&rest, &params, map))
             .map_err(calibration_error)?;
+        if let Some(w) = cal.holey_rest_warning() {
+            let msg =
+                std::ffi::CString::new(w).map_err(|e| PyValueError::new_err(e.to_string()))?;
+            PyErr::warn(py, py.get_type::<PyUserWarning>().as_any(), &msg, 1)?;
+        }
         Ok(Self {
             prepare: params.frame.clone(),
             pipeline: Pipeline::new(cal, params),

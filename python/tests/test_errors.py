@@ -188,3 +188,20 @@ def test_shift_tracker_checks_its_input(sensor, nominal):
     assert t.hold_anchor()
     s = t.update(obs)
     assert s.frame_to_frame_mm == 0.0 and s.from_anchor_mm == 0.0
+
+
+def test_a_rest_with_a_hole_warns():
+    # Bright spots on a 16 px lattice, the middle ones left out (a pressed
+    # rest, or the median of taps): a UserWarning, and the sensor works.
+    yy, xx = np.mgrid[0:480, 0:640]
+    img = np.full((480, 640), 40.0)
+    row = 16.0 * np.sqrt(3) / 2
+    for j in range(int(480 / row) + 1):
+        for i in range(41):
+            x, y = i * 16.0 + (8.0 if j % 2 else 0.0), j * row
+            if np.hypot(x - 320, y - 240) >= 64:
+                img += 150 * np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / 8.0)
+    rest = np.clip(img, 0, 255).round().astype(np.uint8)
+    with pytest.warns(UserWarning, match="holes"):
+        s = dexitac.Sensor.from_rest(rest)
+    assert s.process(rest) is not None

@@ -86,6 +86,26 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// A warning when the rest's marker lattice has holes: more gap points
+    /// ([`rest_gaps`]) than [`HOLEY_REST_SHARE`] of its markers. A rest that
+    /// was pressed, or the pixel-wise median of taps, loses the pins that
+    /// move differently in every frame; contacts are then measured against
+    /// a rest that is not the skin's (measured on the real TacTip taps,
+    /// BENCHMARKS.md: the median image of 200 taps shows 250 and 187 of 331
+    /// pins).
+    pub fn holey_rest_warning(&self) -> Option<String> {
+        let (gaps, n) = (self.gaps_px.len(), self.rest_markers.len());
+        (gaps as f64 > HOLEY_REST_SHARE * n as f64).then(|| {
+            format!(
+                "the rest's marker lattice has holes ({gaps} places inside it with no \
+                 marker within {GAP_PITCH} pitch, against {n} markers): a pressed rest, \
+                 or the median of taps? \
+                 Contacts are measured against it; give a no-contact frame, or \
+                 --rest-from-frames"
+            )
+        })
+    }
+
     /// What following and searching a frame need of the rest.
     pub fn reference(&self) -> markers::Reference<'_> {
         markers::Reference {
@@ -505,6 +525,11 @@ pub const GAP_PITCH: f64 = 0.8;
 /// hole of several missing pins, not the lattice's rim).
 pub const GAP_SIDES_PITCH: f64 = 6.0;
 
+/// [`Calibration::holey_rest_warning`] warns above this many gap points
+/// per rest marker (a good rest of the real TacTip sets has 0-2 for 331
+/// markers, the median image of the taps 113-120).
+pub const HOLEY_REST_SHARE: f64 = 0.02;
+
 /// Places inside the rest lattice where a marker is missing: points of a
 /// half-pitch grid inside the detector's area and search window with no
 /// rest marker within [`GAP_PITCH`] of its spacing, that lie a pitch
@@ -670,6 +695,27 @@ mod tests {
     }
 
     #[test]
+    fn a_rest_with_a_hole_is_warned_of() {
+        // Bright spots on a 16 px lattice; the median of taps loses the
+        // middle pins: those within 4 pitches of the centre are left out.
+        let pins = crate::test_fixtures::hex_points(640, 480, 16.0);
+        let frame = |hole_px: f64| {
+            let spots: Vec<_> = pins
+                .iter()
+                .filter(|p| (p.x - 320.0).hypot(p.y - 240.0) >= hole_px)
+                .map(|&p| (p, 2.0, 150.0))
+                .collect();
+            crate::test_fixtures::spots_frame(640, 480, 40.0, &spots)
+        };
+        let params = Params::default();
+        let whole = calibrate(&[frame(0.0)], &params).unwrap();
+        assert_eq!(whole.holey_rest_warning(), None, "{:?}", whole.gaps_px);
+        let holey = calibrate(&[frame(64.0)], &params).unwrap();
+        let w = holey.holey_rest_warning().expect("a warning");
+        assert!(w.contains("--rest-from-frames"), "{w}");
+    }
+
+    #[test]
     fn gaps_are_missing_pins_and_a_hole_is_searched_in_every_frame() {
         let params = Params::default();
         for cat in [
@@ -700,6 +746,7 @@ mod tests {
                 );
             }
             assert!(cal.gaps_px.len() <= 2, "{cat:?}: {:?}", cal.gaps_px);
+            assert_eq!(cal.holey_rest_warning(), None, "{cat:?}");
         }
         // Three neighbouring pins painted out of the rest frame (a pin
         // missing at rest): a gap there; a frame that has them is followed

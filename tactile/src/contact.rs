@@ -286,6 +286,21 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
     Some(x)
 }
 
+/// True when `region` (on a grid of `step_px`) is at least as wide, as a
+/// disc of its area, as the kernel `h_px` and the marker pitch `pitch_px`: a
+/// dent in the density. Smoothing by `h` spreads any dent over at least `h`,
+/// and one marker that moves opens a hole about a pitch wide, so a narrower
+/// region is a threshold crossing (a lattice ripple where `h` is below the
+/// pitch, noise, or a rest that differs from the frame), not a contact.
+/// [`locate`] leaves those to the tracked markers. Measured on the real
+/// TacTip taps with the median image as the rest (BENCHMARKS.md): such one-
+/// to four-cell regions lay up to 200 px from the tap's contact.
+pub fn is_dent(region: &Region, step_px: usize, h_px: f64, pitch_px: f64) -> bool {
+    let area_px = region.cells as f64 * (step_px * step_px) as f64;
+    let width_px = 2.0 * (area_px / std::f64::consts::PI).sqrt();
+    width_px >= h_px.max(pitch_px)
+}
+
 /// The tracked centre replaces the density centre only when the
 /// displacement lines meet this tightly (RMS of the inlier lines, px)...
 pub const MAX_FIT_RESIDUAL_PX: f64 = 0.6;
@@ -520,6 +535,54 @@ mod tests {
         let mut mask = [true; 100];
         mask[44] = false;
         assert!(segment(&map, &rest, &mask, &loose(), 1.0).is_none());
+    }
+
+    #[test]
+    fn a_lattice_ripple_is_no_dent_a_spread_is() {
+        // A kernel half the pitch leaves ripples in the density: one marker
+        // moved by 0.4 pitch drops a cell or two below 0.75 x rest. A press
+        // that spreads the markers within 3 pitches makes a dent wider than
+        // the pitch.
+        use crate::density::{self, DensitySetup};
+        use crate::params::DensityMode;
+        let (w, h, pitch) = (300, 300, 30.0);
+        let setup = DensitySetup {
+            width: w,
+            height: h,
+            h_px: 15.0,
+            mm_per_px: 0.1,
+            mode: DensityMode::Fast,
+            step_px: 8,
+            truncate_sigmas: 3.0,
+        };
+        let rest = crate::test_fixtures::hex_points(w, h, pitch);
+        let rest_map = density::estimate(&rest, &setup, None);
+        let mask = vec![true; rest_map.values_per_mm2.len()];
+        let c = PointPx::new(150.0, 150.0);
+        let nearest = (0..rest.len())
+            .min_by(|&a, &b| dist(rest[a], c).total_cmp(&dist(rest[b], c)))
+            .unwrap();
+        let mut one = rest.clone();
+        one[nearest].x += 0.4 * pitch;
+        let map = density::estimate(&one, &setup, None);
+        let ripple = segment(&map, &rest_map, &mask, &loose(), 0.1).unwrap();
+        assert!(!is_dent(&ripple, 8, 15.0, pitch), "{ripple:?}");
+        let spread: Vec<PointPx> = rest
+            .iter()
+            .map(|&p| {
+                let r = dist(p, c);
+                let k = if r < 3.0 * pitch {
+                    1.0 + 0.5 * (1.0 - r / (3.0 * pitch))
+                } else {
+                    1.0
+                };
+                PointPx::new(c.x + k * (p.x - c.x), c.y + k * (p.y - c.y))
+            })
+            .collect();
+        let map = density::estimate(&spread, &setup, None);
+        let dent = segment(&map, &rest_map, &mask, &loose(), 0.1).unwrap();
+        assert!(is_dent(&dent, 8, 15.0, pitch), "{dent:?}");
+        assert!(dist(dent.centre, c) < 0.5 * pitch, "{dent:?}");
     }
 
     #[test]

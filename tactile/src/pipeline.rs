@@ -181,7 +181,8 @@ impl Pipeline {
                 &cal.mask,
                 cp,
                 cal.density.mm_per_px,
-            );
+            )
+            .filter(|r| contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px));
         }
         let contact = if skipped {
             None

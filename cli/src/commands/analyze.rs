@@ -125,6 +125,9 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
         cal.pitch_px,
         cal.surface.describe(&cal.rest_markers)
     );
+    if let Some(w) = cal.holey_rest_warning() {
+        tracing::warn!("{w}");
+    }
     let pipeline = Pipeline::new(cal, params.clone());
 
     if let Some(dir) = &args.markers_out {

@@ -217,6 +217,9 @@ pub fn calibrated(
         let params = params_for(params, finger);
         let cal = calibrate::calibrate_mapped(&s.rest, params, s.map)
             .map_err(|e| anyhow!("{}: rest frame(s): {e}", s.label))?;
+        if let Some(w) = cal.holey_rest_warning() {
+            tracing::warn!("{}: {w}", s.label);
+        }
         sensors.push(Sensor {
             source: s.source,
             pipeline: Pipeline::new(cal, params.clone()),
