@@ -222,8 +222,10 @@ impl Sensor {
 
     /// No rest frame: estimates the rest from the frames themselves, as
     /// `dexitac analyze --rest-from-frames` (up to 63 evenly spaced frames;
-    /// the pixel-wise median, then each marker's median position). A
-    /// contact at the same place in most frames becomes part of that rest.
+    /// the pixel-wise median finds the pins, the frame nearest to it gives
+    /// their places). When every frame presses the same place (a set of
+    /// taps), the rest is a pressed skin (the lightest or the median
+    /// press): only deeper presses are seen.
     #[staticmethod]
     #[pyo3(signature = (frames, config=None))]
     fn from_rest_frames(

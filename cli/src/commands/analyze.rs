@@ -28,9 +28,10 @@ pub struct AnalyzeArgs {
     )]
     rest: Vec<PathBuf>,
     /// No rest frame: estimate the rest from the frames themselves (the
-    /// pixel-wise median of up to 63 evenly spaced frames, then each
-    /// marker's median position). A contact at the same place in most
-    /// frames becomes part of that rest and is not seen.
+    /// pixel-wise median of up to 63 evenly spaced frames finds the pins,
+    /// the frame nearest to it gives their places). When every frame
+    /// presses the same place (a set of taps), the rest is a pressed skin
+    /// (the lightest or the median press): only deeper presses are seen.
     #[arg(long, conflicts_with = "rest")]
     rest_from_frames: bool,
     /// Sensor config (TOML); defaults to the paper's parameters.
