@@ -304,7 +304,7 @@ fn detect_in(
     }
     let env = Envelope::new(img, w, h, det.cell_px, det.min_contrast, typical_range);
     let ii = integral(img, w, h);
-    let mut taken = Occupancy::new(frame.width(), frame.height());
+    let mut taken = Occupancy::new([x0, y0, x1, y1]);
     let mut list = Vec::new();
     // A padded pixel's place is the nearest one of the window.
     let (inner_w, inner_h) = (w - pad[0] - pad[2], h - pad[1] - pad[3]);
@@ -634,7 +634,7 @@ fn search_around(
     let followed_at: Vec<PointPx> = list.iter().map(|m| m.pos).collect();
     let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
     let mut searched: Vec<Marker> = Vec::new();
-    let mut taken = Occupancy::new(fw, fh);
+    let mut taken = Occupancy::new([wx0, wy0, wx1, wy1]);
     for b in boxes {
         for m in detect_in(frame, det, b, Some(typical_range)) {
             let p = m.pos;
@@ -797,7 +797,10 @@ fn follow_each(
     if lost > max_lost {
         return None;
     }
-    let mut taken = Occupancy::new(frame.width(), frame.height());
+    let mut taken = Occupancy::new(
+        det.window_px
+            .unwrap_or([0, 0, frame.width(), frame.height()]),
+    );
     let mut claimed: Vec<Marker> = Vec::with_capacity(found.len());
     let mut out = Vec::with_capacity(found.len());
     for (k, f) in found.into_iter().enumerate() {
@@ -1025,6 +1028,8 @@ const RESETTLE_PX: f64 = 0.5;
 /// cell holds the index + 1 of the first marker claimed in it (0: empty), so
 /// that the grid is small to clear for every frame.
 struct Occupancy {
+    x0: f64,
+    y0: f64,
     cols: usize,
     rows: usize,
     cells: Vec<u32>,
@@ -1033,10 +1038,15 @@ struct Occupancy {
 impl Occupancy {
     const CELL_PX: f64 = 4.0;
 
-    fn new(width: usize, height: usize) -> Self {
-        let cols = (width as f64 / Self::CELL_PX).ceil() as usize + 1;
-        let rows = (height as f64 / Self::CELL_PX).ceil() as usize + 1;
+    /// Cells over the window `[x0, y0, x1, y1)` (px); points outside it
+    /// fall in its border cells. A window, not the frame: a search box's
+    /// grid is a few hundred cells to clear, not the frame's 20 000.
+    fn new([x0, y0, x1, y1]: [usize; 4]) -> Self {
+        let cols = ((x1.saturating_sub(x0)) as f64 / Self::CELL_PX).ceil() as usize + 1;
+        let rows = ((y1.saturating_sub(y0)) as f64 / Self::CELL_PX).ceil() as usize + 1;
         Self {
+            x0: x0 as f64,
+            y0: y0 as f64,
             cols,
             rows,
             cells: vec![0; cols * rows],
@@ -1047,8 +1057,8 @@ impl Occupancy {
     /// lies within `radius` (<= one cell).
     fn claim(&mut self, p: PointPx, radius: f64, list: &[Marker]) -> bool {
         // `as usize` saturates negatives to 0 and truncates (= floor for >= 0).
-        let ci = ((p.x / Self::CELL_PX) as usize).min(self.cols - 1);
-        let cj = ((p.y / Self::CELL_PX) as usize).min(self.rows - 1);
+        let ci = (((p.x - self.x0) / Self::CELL_PX) as usize).min(self.cols - 1);
+        let cj = (((p.y - self.y0) / Self::CELL_PX) as usize).min(self.rows - 1);
         for j in cj.saturating_sub(1)..=(cj + 1).min(self.rows - 1) {
             for i in ci.saturating_sub(1)..=(ci + 1).min(self.cols - 1) {
                 let k = self.cells[j * self.cols + i];
