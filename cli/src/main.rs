@@ -146,6 +146,16 @@ impl Command {
 }
 
 fn main() -> ExitCode {
+    // Output piped into a reader that stops early (`dexitac sensor health |
+    // head -1`) ends the process as it ends `cat`, by SIGPIPE, instead of
+    // a panic in `println!` (Rust ignores SIGPIPE before `main`). The
+    // firmware keeps the tanks safe whatever becomes of the host.
+    #[cfg(unix)]
+    // SAFETY: restores the default action of one signal before any thread
+    // is started; no handler runs Rust code.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     logging::init(cli.verbose, cli.quiet);
     let Some(command) = cli.command else {

@@ -199,3 +199,27 @@ fn health_passes_a_good_skin_and_fails_one_with_holes() {
     assert_eq!(o.status.code(), Some(3));
     assert!(stderr(&o).contains("nope.png"), "{}", stderr(&o));
 }
+
+#[cfg(unix)]
+#[test]
+fn health_into_a_closed_pipe_does_not_panic() {
+    // `dexitac sensor health ... | head -1`: the reader is gone before the
+    // report is written. The process ends by SIGPIPE (as `cat` does), not
+    // by a panic (exit 101) in `println!`.
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().unwrap();
+    let rest = dir.path().join("rest.png");
+    save_rest(&rest, 0.0, 1);
+    let rest = rest.to_str().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_dexitac"))
+        .args(["sensor", "health", "--rest", rest, rest])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
+    assert_eq!(o.status.signal(), Some(libc::SIGPIPE), "{:?}", o.status);
+}

@@ -292,7 +292,10 @@ fn solve6(mut a: [[f64; 6]; 6], mut b: [f64; 6]) -> Option<[f64; 6]> {
 /// and one marker that moves opens a hole about a pitch wide, so a narrower
 /// region is a threshold crossing (a lattice ripple where `h` is below the
 /// pitch, noise, or a rest that differs from the frame), not a contact.
-/// [`locate`] leaves those to the tracked markers. Measured on the real
+/// With [`CentreMethod::Hybrid`] the pipeline leaves those to the tracked
+/// markers ([`locate`] with no region); the density-only method keeps
+/// them (on the generator's frames 2 of 120 contacts are that narrow at
+/// the default grid step). Measured on the real
 /// TacTip taps with the median image as the rest (BENCHMARKS.md): such one-
 /// to four-cell regions lay up to 200 px from the tap's contact.
 pub fn is_dent(region: &Region, step_px: usize, h_px: f64, pitch_px: f64) -> bool {

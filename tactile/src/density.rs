@@ -299,7 +299,7 @@ mod tests {
 
     #[test]
     fn gaussian_samples_match_the_direct_formula() {
-        // Kernel widths from a tenth of the step to ten steps, windows of
+        // Kernel widths from a tenth of the step to fifteen steps, windows of
         // 3 h either side, any sub-step offset.
         let mut out = Vec::new();
         for &(h, step) in &[

@@ -28,7 +28,7 @@ use crate::contact::{self, Contact};
 use crate::density::{self, CellRect};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Markers, Search};
-use crate::params::{DensityMode, Params};
+use crate::params::{CentreMethod, DensityMode, Params};
 use crate::tracking::{self, Field};
 use crate::PointPx;
 
@@ -182,7 +182,12 @@ impl Pipeline {
                 cp,
                 cal.density.mm_per_px,
             )
-            .filter(|r| contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px));
+            // With the tracked markers at hand, a region narrower than a dent
+            // is theirs to judge; the paper's density-only method keeps it.
+            .filter(|r| {
+                cp.centre == CentreMethod::Density
+                    || contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px)
+            });
         }
         let contact = if skipped {
             None
