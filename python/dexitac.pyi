@@ -151,7 +151,10 @@ class Sensor:
 
     @staticmethod
     def from_rest(rest: Union[Frame, Sequence[Frame]], config: Config = None) -> "Sensor":
-        """Calibrates on one rest frame (no contact) or several, as ``dexitac analyze --rest``."""
+        """Calibrates on one rest frame (no contact) or several, as ``dexitac analyze --rest``.
+
+        Warns (``UserWarning``) when the rest's marker lattice has holes (a pressed rest, or the
+        median image of taps)."""
     @staticmethod
     def from_rest_frames(frames: Sequence[Frame], config: Config = None) -> "Sensor":
         """Estimates the rest from the frames themselves, as ``dexitac analyze --rest-from-frames``."""

@@ -193,6 +193,8 @@ impl Sensor {
     ///
     /// Raises ValueError on a bad array or config, or when the rest frame
     /// shows too few markers; OSError when a config file cannot be read.
+    /// Warns (UserWarning) when the rest's marker lattice has holes (a
+    /// pressed rest, or the median image of taps).
     #[staticmethod]
     #[pyo3(signature = (rest, config=None))]
     fn from_rest(
