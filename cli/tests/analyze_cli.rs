@@ -398,3 +398,71 @@ fn same_named_frames_from_two_folders_stay_apart() {
     assert_eq!(again.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&again.stderr).contains("already holds 2 CSV file(s)"));
 }
+
+#[test]
+fn a_rest_with_holes_is_replaced_by_one_from_the_frames_unless_kept() {
+    // The rest's middle pins painted out (as the median image of taps
+    // loses them); 20 frames with presses at random places. By default the
+    // rest is estimated from the frames, with --keep-rest the given one is
+    // used, both with a warning.
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let frames = root.join("frames");
+    std::fs::create_dir(&frames).unwrap();
+    let sensor = Category::Nominal.sensor(640, 480, 21);
+    let mut rest = synth::rest_frame(&sensor, 1);
+    let level = {
+        let mut v = rest.image.data().to_vec();
+        v.sort_unstable();
+        v[v.len() / 4]
+    };
+    let data: Vec<u8> = rest
+        .image
+        .data()
+        .iter()
+        .enumerate()
+        .map(|(k, &v)| {
+            let (x, y) = ((k % 640) as f64, (k / 640) as f64);
+            if (x - 320.0).hypot(y - 240.0) < 80.0 {
+                level
+            } else {
+                v
+            }
+        })
+        .collect();
+    rest.image = dexitac_tactile::frame::GreyFrame::new(640, 480, data).unwrap();
+    save_grey(&rest, &root.join("rest.png"));
+    for k in 0..20u64 {
+        let f = synth::render(&Category::Nominal.scene(&sensor, 60 + k));
+        save_grey(&f, &frames.join(format!("press_{k:02}.png")));
+    }
+    let rest = root.join("rest.png");
+    let out = root.join("pred.csv");
+    let args = |keep: bool| {
+        let mut a = vec![
+            "analyze",
+            "--rest",
+            rest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            frames.to_str().unwrap(),
+        ];
+        if keep {
+            a.push("--keep-rest");
+        }
+        a
+    };
+    let o = run(&args(false));
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("has holes"), "{err}");
+    assert!(
+        err.contains("Using the rest estimated from the frames"),
+        "{err}"
+    );
+    let o = run(&args(true));
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("has holes"), "{err}");
+    assert!(!err.contains("Using the rest estimated"), "{err}");
+}

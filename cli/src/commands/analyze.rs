@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use dexitac_tactile::area::WorkToInput;
 use dexitac_tactile::calibrate;
 use dexitac_tactile::displacement::ShiftTracker;
-use dexitac_tactile::frame::{self, Prepared, RawFrame};
+use dexitac_tactile::frame::{self, GreyFrame, Prepared, RawFrame};
 use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::PointPx;
@@ -34,6 +34,13 @@ pub struct AnalyzeArgs {
     /// (the lightest or the median press): only deeper presses are seen.
     #[arg(long, conflicts_with = "rest")]
     rest_from_frames: bool,
+    /// Use the given rest even when its marker lattice has holes. By
+    /// default a rest with holes (a pressed rest, or the median image of
+    /// taps) is replaced by one estimated from the frames, as
+    /// --rest-from-frames, when there are at least 16 frames and that
+    /// estimate has fewer holes.
+    #[arg(long, conflicts_with = "rest_from_frames")]
+    keep_rest: bool,
     /// Sensor config (TOML); defaults to the paper's parameters.
     #[arg(long, value_name = "SENSOR.toml")]
     config: Option<PathBuf>,
@@ -51,6 +58,67 @@ pub struct AnalyzeArgs {
 /// CSV header (the first eight columns are the interface; more may follow).
 const HEADER: &str =
     "frame,cx,cy,n_markers,t_detect_ms,t_kde_ms,t_segment_ms,t_total_ms,area_mm2,source,skipped,shift_mm,shift_from_anchor_mm";
+
+/// A rest with holes is replaced by one estimated from the frames only when
+/// there are at least this many of them (fewer say little of the rest).
+const HOLEY_REST_MIN_FRAMES: usize = 16;
+
+/// Decodes and prepares rest frames of one size: the working frames, the
+/// input size and the working-to-input map.
+fn load_rests(
+    paths: &[&PathBuf],
+    params: &Params,
+) -> anyhow::Result<(Vec<GreyFrame>, (usize, usize), WorkToInput)> {
+    let mut prepared = Vec::new();
+    let mut size = None;
+    let mut map = WorkToInput::IDENTITY;
+    for path in paths {
+        let d = decode(path).map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
+        if let Some((w, h)) = size {
+            if (w, h) != (d.width, d.height) {
+                return Err(anyhow!(
+                    "rest frame {}: size {}x{} differs from {w}x{h}",
+                    path.display(),
+                    d.width,
+                    d.height
+                ));
+            }
+        }
+        size = Some((d.width, d.height));
+        let p = frame::prepare(&d.raw(), &params.frame)
+            .map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
+        map = p.map();
+        prepared.push(p.grey);
+    }
+    let size = size.ok_or_else(|| anyhow!("no rest frame"))?;
+    Ok((prepared, size, map))
+}
+
+/// The rest estimated from `paths` (as `--rest-from-frames`), or `None`
+/// when they cannot be read, differ in size from the rest (`size`), or
+/// give no calibration (each reason logged).
+fn estimate_rest(
+    paths: &[&PathBuf],
+    params: &Params,
+    size: (usize, usize),
+) -> Option<calibrate::Calibration> {
+    let (frames, got, map) = load_rests(paths, params)
+        .map_err(|e| tracing::info!("no rest estimated from the frames: {e}"))
+        .ok()?;
+    if got != size {
+        tracing::info!(
+            "no rest estimated from the frames: they are {}x{} px, the rest {}x{} px",
+            got.0,
+            got.1,
+            size.0,
+            size.1
+        );
+        return None;
+    }
+    calibrate::calibrate_from_frames(&frames, params, map)
+        .map_err(|e| tracing::info!("no rest estimated from the frames: {e}"))
+        .ok()
+}
 
 /// A decoded image file.
 struct Decoded {
@@ -86,49 +154,48 @@ impl AnalyzeArgs {
 fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     let params = load_sensor_config(args.config.as_deref())?;
     let (files, mut failed) = expand(&args.frames);
-    let rest_paths: Vec<&PathBuf> = if args.rest_from_frames {
+    let spaced = || {
         let n = files.len().min(calibrate::REST_FROM_FRAMES_MAX);
-        (0..n).map(|k| &files[k * files.len() / n]).collect()
-    } else {
-        args.rest.iter().collect()
+        (0..n)
+            .map(|k| &files[k * files.len() / n])
+            .collect::<Vec<_>>()
     };
-    let mut rest_prepared = Vec::new();
-    let mut rest_size = None;
-    let mut map = WorkToInput::IDENTITY;
-    for path in rest_paths {
-        let d = decode(path).map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
-        if let Some((w, h)) = rest_size {
-            if (w, h) != (d.width, d.height) {
-                return Err(anyhow!(
-                    "rest frame {}: size {}x{} differs from {w}x{h}",
-                    path.display(),
-                    d.width,
-                    d.height
-                ));
-            }
-        }
-        rest_size = Some((d.width, d.height));
-        let p = frame::prepare(&d.raw(), &params.frame)
-            .map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
-        map = p.map();
-        rest_prepared.push(p.grey);
-    }
-    let (rest_w, rest_h) = rest_size.ok_or_else(|| anyhow!("no rest frame"))?;
-    let cal = if args.rest_from_frames {
+    let (rest_prepared, (rest_w, rest_h), map) = if args.rest_from_frames {
+        load_rests(&spaced(), &params)?
+    } else {
+        load_rests(&args.rest.iter().collect::<Vec<_>>(), &params)?
+    };
+    let mut cal = if args.rest_from_frames {
         calibrate::calibrate_from_frames(&rest_prepared, &params, map)
     } else {
         calibrate::calibrate_mapped(&rest_prepared, &params, map)
     }
     .map_err(|e| anyhow!("{e}"))?;
+    if let Some(w) = cal.holey_rest_warning() {
+        let try_frames =
+            !(args.rest_from_frames || args.keep_rest || files.len() < HOLEY_REST_MIN_FRAMES);
+        let estimate = try_frames
+            .then(|| estimate_rest(&spaced(), &params, (rest_w, rest_h)))
+            .flatten();
+        match estimate {
+            Some(est) if est.gaps_px.len() < cal.gaps_px.len() => {
+                tracing::warn!(
+                    "{w}. Using the rest estimated from the frames instead ({} markers, {} such \
+                     places; --keep-rest keeps the given one)",
+                    est.rest_markers.len(),
+                    est.gaps_px.len()
+                );
+                cal = est;
+            }
+            _ => tracing::warn!("{w}"),
+        }
+    }
     tracing::info!(
         "rest: {} markers, pitch {:.1} px, skin {}",
         cal.rest_markers.len(),
         cal.pitch_px,
         cal.surface.describe(&cal.rest_markers)
     );
-    if let Some(w) = cal.holey_rest_warning() {
-        tracing::warn!("{w}");
-    }
     let pipeline = Pipeline::new(cal, params.clone());
 
     if let Some(dir) = &args.markers_out {
