@@ -299,7 +299,7 @@ pub const REST_FROM_FRAMES_MAX: usize = 63;
 /// are dropped. Measured on the real TacTip taps (BENCHMARKS.md): with
 /// the median of each marker's places instead, the average tap became the
 /// rest, and the contact centre followed the tilt less well (LOO R^2
-/// 0.91 / 0.81 against 0.92 / 0.91 on cr).
+/// 0.91 / 0.81 against 0.92 / 0.90 on cr).
 ///
 /// What it can see: a skin untouched in some frames is at its true rest.
 /// What it cannot: when every frame presses the same place (a set of taps,
@@ -486,13 +486,7 @@ fn rim_band(rest: &GreyFrame, detector: &Detector, outer: SensingArea) -> RimBan
         rim: None,
         ..detector.clone()
     };
-    let inverted;
-    let positive = if detector.dark {
-        inverted = rest.inverted();
-        &inverted
-    } else {
-        rest
-    };
+    let positive = &*markers::positive(rest, detector.dark);
     let inside = |p: PointPx| detector.area.as_ref().is_none_or(|a| a.contains(p));
     let pins: Vec<markers::Marker> = markers::detect(rest, &probe)
         .list

@@ -236,7 +236,7 @@ impl Detector {
 const RANGE_FLOOR_FRACTION: f32 = 0.2;
 
 /// The frame with bright markers: itself, or its negative for dark ones.
-fn positive(frame: &GreyFrame, dark: bool) -> std::borrow::Cow<'_, GreyFrame> {
+pub(crate) fn positive(frame: &GreyFrame, dark: bool) -> std::borrow::Cow<'_, GreyFrame> {
     if dark {
         std::borrow::Cow::Owned(frame.inverted())
     } else {
