@@ -1508,66 +1508,97 @@ fn refine(
     if x0 >= x1 || y0 >= y1 {
         return None;
     }
-    let data = frame.data();
-    let (stride, span) = (w as usize, (x1 - x0 + 1) as usize);
-    let first = (y0 * w + x0) as usize;
-    let starts = (0..=(y1 - y0) as usize).map(|j| first + j * stride);
-    let row = |start: usize| &data[start..start + span];
-    let last = first + (y1 - y0) as usize * stride;
-    let mut lo = row(first)
-        .iter()
-        .chain(row(last))
-        .copied()
-        .min()
-        .unwrap_or(u8::MAX);
-    for start in starts.clone() {
-        lo = lo.min(data[start]).min(data[start + span - 1]);
-    }
-    let mut hi = 0u8;
-    for y in (cy - 1).max(y0)..=(cy + 1).min(y1) {
-        let at = (y * w) as usize;
-        let (a, b) = ((cx - 1).max(x0) as usize, (cx + 1).min(x1) as usize);
-        hi = data[at + a..=at + b].iter().fold(hi, |m, &v| m.max(v));
-    }
-    let contrast = hi as f32 - lo as f32;
-    if contrast < min_contrast.max(1.0) {
-        return None;
-    }
-    // lo + (hi - lo) / 2 <= 255.
-    let cut = lo + ((hi - lo) >> 1);
-    let (sw, sx, sy) = if span <= LANES && last + LANES <= data.len() {
-        weighted_sums_narrow(data, first, stride, (y1 - y0 + 1) as usize, span, cut)
-    } else {
-        weighted_sums(starts.map(row), cut)
+    // The 3x3 around the guess, clipped to the window (window coordinates).
+    let peak = [
+        ((cx - 1).max(x0) - x0) as usize,
+        ((cx + 1).min(x1) - x0) as usize,
+        ((cy - 1).max(y0) - y0) as usize,
+        ((cy + 1).min(y1) - y0) as usize,
+    ];
+    let win = Window {
+        first: (y0 * w + x0) as usize,
+        stride: w as usize,
+        span: (x1 - x0 + 1) as usize,
+        rows: (y1 - y0 + 1) as usize,
+        peak,
     };
-    if sw == 0 {
+    let data = frame.data();
+    let m = if win.span <= LANES
+        && win.rows <= LANES
+        && win.first + (win.rows - 1) * win.stride + LANES <= data.len()
+    {
+        narrow_moments(data, &win, min_contrast)
+    } else {
+        plain_moments(data, &win, min_contrast)
+    }?;
+    if m.sw == 0 {
         return None;
     }
     let c = PointPx::new(
-        x0 as f64 + sx as f64 / sw as f64,
-        y0 as f64 + sy as f64 / sw as f64,
+        x0 as f64 + m.sx as f64 / m.sw as f64,
+        y0 as f64 + m.sy as f64 / m.sw as f64,
     );
     // Effective area above half maximum: the weight over the peak's
     // height above the cut (a flat top's own area, a Gaussian's half).
-    let area = sw as f32 / (hi - cut).max(1) as f32;
+    let area = m.sw as f32 / (m.hi - m.cut).max(1) as f32;
+    let contrast = m.hi as f32 - m.lo as f32;
     ((c.x - guess.x).abs() <= rw as f64 && (c.y - guess.y).abs() <= rw as f64)
         .then_some((c, contrast, area))
 }
 
-/// Lanes of [`weighted_sums_narrow`]: a window at most this wide is summed
-/// in one fixed-width pass per row (a marker radius up to 5 px).
-const LANES: usize = 16;
+/// A centroid window of [`refine`]: `rows` rows of `span` pixels from
+/// `first` (a frame of row length `stride`), and the 3x3 around the guess
+/// as `[x0, x1, y0, y1]` (inclusive, window coordinates).
+struct Window {
+    first: usize,
+    stride: usize,
+    span: usize,
+    rows: usize,
+    peak: [usize; 4],
+}
 
-/// The centroid sums `(sum w, sum w x, sum w y)` of the weights
-/// `max(0, v - cut)` over the window's rows (`x`, `y` from the window's
-/// corner). Wrapping arithmetic lets the loop vectorise with overflow
-/// checks on (release profile); it cannot wrap: a window has at most
-/// 63 x 63 pixels of weight <= 255 and index <= 62, so every sum < 2^26.
-fn weighted_sums<'a>(rows: impl Iterator<Item = &'a [u8]>, cut: u8) -> (u32, u32, u32) {
+/// What [`refine`] measures in a window: background `lo` (the outline's
+/// darkest pixel), peak `hi` (the 3x3's brightest), the half-maximum `cut`
+/// and the centroid sums `(sum w, sum w x, sum w y)` of the weights
+/// `max(0, v - cut)` (`x`, `y` from the window's corner).
+#[derive(Debug, PartialEq, Eq)]
+struct Moments {
+    lo: u8,
+    hi: u8,
+    cut: u8,
+    sw: u32,
+    sx: u32,
+    sy: u32,
+}
+
+/// The half-maximum between `lo` and `hi`, `None` below the contrast floor.
+fn half_maximum(lo: u8, hi: u8, min_contrast: f32) -> Option<u8> {
+    // lo + (hi - lo) / 2 <= 255.
+    (hi as f32 - lo as f32 >= min_contrast.max(1.0)).then(|| lo + ((hi - lo) >> 1))
+}
+
+/// [`Moments`] of any window, row by row. Wrapping arithmetic lets the loop
+/// vectorise with overflow checks on (release profile); it cannot wrap: a
+/// window has at most 63 x 63 pixels of weight <= 255 and index <= 62, so
+/// every sum < 2^26.
+fn plain_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
+    let row = |j: usize| &data[win.first + j * win.stride..][..win.span];
+    let mut lo = row(0)
+        .iter()
+        .chain(row(win.rows - 1))
+        .copied()
+        .min()
+        .unwrap_or(u8::MAX);
+    for j in 0..win.rows {
+        lo = lo.min(row(j)[0]).min(row(j)[win.span - 1]);
+    }
+    let [a, b, c, d] = win.peak;
+    let hi = (c..=d).flat_map(|j| &row(j)[a..=b]).copied().max().unwrap_or(0);
+    let cut = half_maximum(lo, hi, min_contrast)?;
     let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
-    for (j, row) in rows.enumerate() {
+    for j in 0..win.rows {
         let (mut rw_sum, mut rx_sum) = (0u32, 0u32);
-        for (k, &v) in row.iter().enumerate() {
+        for (k, &v) in row(j).iter().enumerate() {
             let wgt = v.saturating_sub(cut) as u32;
             rw_sum = rw_sum.wrapping_add(wgt);
             rx_sum = rx_sum.wrapping_add(wgt.wrapping_mul(k as u32));
@@ -1576,51 +1607,84 @@ fn weighted_sums<'a>(rows: impl Iterator<Item = &'a [u8]>, cut: u8) -> (u32, u32
         sx = sx.wrapping_add(rx_sum);
         sy = sy.wrapping_add(rw_sum.wrapping_mul(j as u32));
     }
-    (sw, sx, sy)
+    Some(Moments {
+        lo,
+        hi,
+        cut,
+        sw,
+        sx,
+        sy,
+    })
 }
 
-/// [`weighted_sums`] for a window at most [`LANES`] wide, exactly: each row
-/// is read as [`LANES`] bytes from its start (`first + j stride`; rows
-/// past `data` are skipped, the caller keeps them in), the lanes past
-/// `span` masked off, and the row's weight and x moment summed in `u16`
-/// (at most 16 x 255 and 120 x 255). Fixed-width lanes vectorise where the
-/// window's odd width (11-13 px) would not. Not inlined: inside `refine`
-/// the vectoriser gave up on it (3x the instructions).
+/// Lanes of [`narrow_moments`]: a window at most this wide and high (a
+/// marker radius up to 5 px) is read once into a fixed block.
+const LANES: usize = 16;
+
+/// [`plain_moments`] for a window at most [`LANES`] wide and high whose
+/// rows can each be read as [`LANES`] bytes, exactly: the rows are copied
+/// into a fixed block once, the lanes past `span` masked off, and the
+/// weights summed down the columns in `u16` (at most 16 x 255, and
+/// 255 x (0 + ... + 15) for the y moment). Fixed-width lanes vectorise where
+/// the window's odd width (11-13 px) would not. Not inlined: inside
+/// `refine` the vectoriser gave up on such loops (3x the instructions).
 #[inline(never)]
-fn weighted_sums_narrow(
-    data: &[u8],
-    first: usize,
-    stride: usize,
-    rows: usize,
-    span: usize,
-    cut: u8,
-) -> (u32, u32, u32) {
-    const INDEX: [u16; LANES] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
-    let mut mask = [0u8; LANES];
-    mask.iter_mut().take(span).for_each(|m| *m = u8::MAX);
-    let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
-    for j in 0..rows {
-        let start = first + j * stride;
-        let Some(row) = data
-            .get(start..start + LANES)
-            .and_then(|r| <&[u8; LANES]>::try_from(r).ok())
-        else {
-            continue;
-        };
-        let mut wgt = [0u16; LANES];
-        for i in 0..LANES {
-            wgt[i] = (row[i].saturating_sub(cut) & mask[i]) as u16;
-        }
-        let row_w = wgt.iter().fold(0u16, |a, &v| a.wrapping_add(v)) as u32;
-        let row_x = wgt
-            .iter()
-            .zip(&INDEX)
-            .fold(0u16, |a, (&v, &k)| a.wrapping_add(v.wrapping_mul(k))) as u32;
-        sw = sw.wrapping_add(row_w);
-        sx = sx.wrapping_add(row_x);
-        sy = sy.wrapping_add(row_w.wrapping_mul(j as u32));
+fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
+    const INDEX: [u32; LANES] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+    let (rows, span) = (win.rows.min(LANES), win.span.clamp(1, LANES));
+    let mut block = [[0u8; LANES]; LANES];
+    for (j, r) in block.iter_mut().enumerate().take(rows) {
+        let start = win.first + j * win.stride;
+        r.copy_from_slice(data.get(start..start + LANES)?);
     }
-    (sw, sx, sy)
+    let mut keep = [0u8; LANES];
+    keep.iter_mut().take(span).for_each(|k| *k = u8::MAX);
+    // The outline: the first and last rows, and the first and last columns
+    // (of the column minima).
+    let mut col_min = [u8::MAX; LANES];
+    for r in &block[..rows] {
+        for (m, &v) in col_min.iter_mut().zip(r) {
+            *m = (*m).min(v);
+        }
+    }
+    let row_min = |r: &[u8; LANES]| {
+        r.iter()
+            .zip(&keep)
+            .fold(u8::MAX, |m, (&v, &k)| m.min(v | !k))
+    };
+    let lo = col_min[0]
+        .min(col_min[span - 1])
+        .min(row_min(&block[0]))
+        .min(row_min(&block[rows - 1]));
+    let [a, b, c, d] = win.peak;
+    let (b, d) = (b.min(LANES - 1), d.min(rows - 1));
+    let hi = block[c.min(d)..=d]
+        .iter()
+        .flat_map(|r| &r[a.min(b)..=b])
+        .copied()
+        .max()
+        .unwrap_or(0);
+    let cut = half_maximum(lo, hi, min_contrast)?;
+    let (mut acc_w, mut acc_y) = ([0u16; LANES], [0u16; LANES]);
+    for (j, r) in block[..rows].iter().enumerate() {
+        let jj = j as u16;
+        for i in 0..LANES {
+            let wgt = (r[i].saturating_sub(cut) & keep[i]) as u16;
+            acc_w[i] = acc_w[i].wrapping_add(wgt);
+            acc_y[i] = acc_y[i].wrapping_add(wgt.wrapping_mul(jj));
+        }
+    }
+    let sw = acc_w.iter().map(|&v| v as u32).sum();
+    let sx = acc_w.iter().zip(&INDEX).map(|(&v, &k)| v as u32 * k).sum();
+    let sy = acc_y.iter().map(|&v| v as u32).sum();
+    Some(Moments {
+        lo,
+        hi,
+        cut,
+        sw,
+        sx,
+        sy,
+    })
 }
 
 #[cfg(test)]
@@ -1646,23 +1710,32 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// The fixed-width centroid sums are the plain sums, to the last
-        /// bit, for every window width up to 16 and any cut.
+        /// The fixed-block moments are the plain ones, to the last bit, for
+        /// every window up to 16 x 16, any 3x3 inside it and any contrast
+        /// floor.
         #[test]
-        fn narrow_centroid_sums_equal_the_plain_sums(
+        fn narrow_moments_equal_the_plain_moments(
             pixels in proptest::collection::vec(proptest::prelude::any::<u8>(), 40 * 20),
             x0 in 0usize..20,
             span in 1usize..=LANES,
-            rows in 1usize..20,
-            cut in proptest::prelude::any::<u8>(),
+            rows in 1usize..=LANES,
+            px in 0usize..LANES,
+            py in 0usize..LANES,
+            min_contrast in 0.0f32..80.0,
         ) {
-            let stride = 40;
-            let plain = weighted_sums(
-                (0..rows).map(|j| &pixels[j * stride + x0..][..span]),
-                cut,
+            let (px, py) = (px.min(span - 1), py.min(rows - 1));
+            let win = Window {
+                first: x0,
+                stride: 40,
+                span,
+                rows,
+                peak: [px.saturating_sub(1), (px + 1).min(span - 1), py.saturating_sub(1), (py + 1).min(rows - 1)],
+            };
+            let pixels = &pixels[..(rows - 1) * 40 + x0 + LANES];
+            proptest::prop_assert_eq!(
+                narrow_moments(pixels, &win, min_contrast),
+                plain_moments(pixels, &win, min_contrast)
             );
-            let narrow = weighted_sums_narrow(&pixels, x0, stride, rows, span, cut);
-            proptest::prop_assert_eq!(narrow, plain);
         }
 
         /// The 2x2 binning is the floor of each block's mean, for any width
