@@ -1508,12 +1508,14 @@ fn refine(
     if x0 >= x1 || y0 >= y1 {
         return None;
     }
-    // The 3x3 around the guess, clipped to the window (window coordinates).
+    // The 3x3 around the guess, clipped to the window (window coordinates;
+    // a guess past the frame's edge keeps the edge's pixels).
+    let (px1, py1) = ((cx + 1).min(x1), (cy + 1).min(y1));
     let peak = [
-        ((cx - 1).max(x0) - x0) as usize,
-        ((cx + 1).min(x1) - x0) as usize,
-        ((cy - 1).max(y0) - y0) as usize,
-        ((cy + 1).min(y1) - y0) as usize,
+        ((cx - 1).max(x0).min(px1) - x0) as usize,
+        (px1 - x0) as usize,
+        ((cy - 1).max(y0).min(py1) - y0) as usize,
+        (py1 - y0) as usize,
     ];
     let win = Window {
         first: (y0 * w + x0) as usize,
@@ -1630,40 +1632,46 @@ const LANES: usize = 16;
 /// `refine` the vectoriser gave up on such loops (3x the instructions).
 #[inline(never)]
 fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
-    const INDEX: [u32; LANES] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
-    let (rows, span) = (win.rows.min(LANES), win.span.clamp(1, LANES));
+    const INDEX: [u8; LANES] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
+    let (rows, span) = (win.rows.clamp(1, LANES), win.span.clamp(1, LANES));
     let mut block = [[0u8; LANES]; LANES];
-    for (j, r) in block.iter_mut().enumerate().take(rows) {
-        let start = win.first + j * win.stride;
-        r.copy_from_slice(data.get(start..start + LANES)?);
+    let mut start = win.first;
+    for r in block.iter_mut().take(rows) {
+        r.copy_from_slice(data.get(start..start.wrapping_add(LANES))?);
+        start = start.wrapping_add(win.stride);
     }
     let mut keep = [0u8; LANES];
-    keep.iter_mut().take(span).for_each(|k| *k = u8::MAX);
-    // The outline: the first and last rows, and the first and last columns
-    // (of the column minima).
+    for (k, &i) in keep.iter_mut().zip(&INDEX) {
+        *k = if (i as usize) < span { u8::MAX } else { 0 };
+    }
+    // The outline: the first and last rows (the lanes past `span` lifted
+    // out of the way), and the first and last columns of the column minima.
     let mut col_min = [u8::MAX; LANES];
     for r in &block[..rows] {
         for (m, &v) in col_min.iter_mut().zip(r) {
             *m = (*m).min(v);
         }
     }
-    let row_min = |r: &[u8; LANES]| {
-        r.iter()
-            .zip(&keep)
-            .fold(u8::MAX, |m, (&v, &k)| m.min(v | !k))
-    };
-    let lo = col_min[0]
-        .min(col_min[span - 1])
-        .min(row_min(&block[0]))
-        .min(row_min(&block[rows - 1]));
+    let mut ends = [0u8; LANES];
+    for (i, e) in ends.iter_mut().enumerate() {
+        *e = (block[0][i] | !keep[i]).min(block[rows - 1][i] | !keep[i]);
+    }
+    // Horizontal minimum by halving (vectorises; a fold does not).
+    for half in [8, 4, 2, 1] {
+        for i in 0..half {
+            ends[i] = ends[i].min(ends[i + half]);
+        }
+    }
+    let lo = ends[0].min(col_min[0]).min(col_min[span - 1]);
+    // The 3x3 (at most) around the guess: its first, middle and last
+    // columns of each of its rows.
     let [a, b, c, d] = win.peak;
-    let (b, d) = (b.min(LANES - 1), d.min(rows - 1));
-    let hi = block[c.min(d)..=d]
+    let (b, d) = (b.min(span - 1), d.min(rows - 1));
+    let (a, c) = (a.min(b), c.min(d));
+    let mid = (a + 1).min(b);
+    let hi = block[c..=d]
         .iter()
-        .flat_map(|r| &r[a.min(b)..=b])
-        .copied()
-        .max()
-        .unwrap_or(0);
+        .fold(0u8, |m, r| m.max(r[a]).max(r[mid]).max(r[b]));
     let cut = half_maximum(lo, hi, min_contrast)?;
     let (mut acc_w, mut acc_y) = ([0u16; LANES], [0u16; LANES]);
     for (j, r) in block[..rows].iter().enumerate() {
@@ -1675,7 +1683,11 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
         }
     }
     let sw = acc_w.iter().map(|&v| v as u32).sum();
-    let sx = acc_w.iter().zip(&INDEX).map(|(&v, &k)| v as u32 * k).sum();
+    let sx = acc_w
+        .iter()
+        .zip(&INDEX)
+        .map(|(&v, &k)| v as u32 * k as u32)
+        .sum();
     let sy = acc_y.iter().map(|&v| v as u32).sum();
     Some(Moments {
         lo,
