@@ -2,7 +2,8 @@
 //! frame -> grey -> optional crop -> rescale to the working size
 //! (640x480 by default).
 //!
-//! Grey is the BT.601 luma `(77 R + 150 G + 29 B) / 256`. Rescaling maps
+//! Grey is the brightest of R, G and B by default, or the BT.601 luma
+//! `(77 R + 150 G + 29 B) / 256` ([`Grey`]). Rescaling maps
 //! pixel centres (`x_in = crop_x + (x_work + 0.5) * sx - 0.5`); an integer
 //! downscale averages `k x k` blocks, any other factor samples bilinearly.
 //! [`Prepared::to_input`] maps working coordinates back to the input image.
@@ -10,7 +11,7 @@
 //! ([`crate::calibrate`]).
 
 use crate::area::WorkToInput;
-use crate::params::FrameParams;
+use crate::params::{FrameParams, Grey};
 use crate::PointPx;
 
 /// Largest accepted input side, px (a bigger frame is an error, not an OOM).
@@ -172,7 +173,7 @@ impl Prepared {
 
 /// Stage 1 entry: grey, crop, rescale to the working size.
 pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, FrameError> {
-    let grey = to_grey(raw)?;
+    let grey = to_grey(raw, params.grey)?;
     let (cx, cy, cw, ch) = match params.crop_px {
         None => (0, 0, grey.width, grey.height),
         Some(c) => {
@@ -238,8 +239,8 @@ pub fn working_size(cw: usize, ch: usize, params: &FrameParams) -> (usize, usize
     )
 }
 
-/// Converts any supported raw frame to grey (no resize).
-pub fn to_grey(raw: &RawFrame<'_>) -> Result<GreyFrame, FrameError> {
+/// Converts any supported raw frame to grey (no resize), as `grey` says.
+pub fn to_grey(raw: &RawFrame<'_>, grey: Grey) -> Result<GreyFrame, FrameError> {
     check_size(raw.width, raw.height)?;
     if !matches!(raw.channels, 1 | 3 | 4) {
         return Err(FrameError::Channels(raw.channels));
@@ -251,10 +252,12 @@ pub fn to_grey(raw: &RawFrame<'_>) -> Result<GreyFrame, FrameError> {
             got: raw.data.len(),
         });
     }
-    let data = match raw.channels {
-        1 => raw.data.to_vec(),
-        3 => luma::<3>(raw.data),
-        _ => luma::<4>(raw.data),
+    let data = match (raw.channels, grey) {
+        (1, _) => raw.data.to_vec(),
+        (3, Grey::Luma) => luma::<3>(raw.data),
+        (3, Grey::Max) => max_channel::<3>(raw.data),
+        (_, Grey::Luma) => luma::<4>(raw.data),
+        (_, Grey::Max) => max_channel::<4>(raw.data),
     };
     GreyFrame::new(raw.width, raw.height, data)
 }
@@ -273,6 +276,13 @@ fn luma<const C: usize>(data: &[u8]) -> Vec<u8> {
         *o = (y >> 8) as u8;
     }
     out
+}
+
+/// The brightest of R, G and B of interleaved `C`-channel pixels.
+fn max_channel<const C: usize>(data: &[u8]) -> Vec<u8> {
+    data.chunks_exact(C)
+        .map(|p| p[0].max(p[1]).max(p[2]))
+        .collect()
 }
 
 /// Crops `rect = [x, y, w, h]` (inside `src`) and rescales to `ow x oh`.
@@ -354,16 +364,28 @@ mod tests {
     }
 
     #[test]
-    fn rgb_becomes_luma() {
-        let data = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255];
+    fn rgb_becomes_luma_or_its_brightest_channel() {
+        let data = [255, 0, 0, 0, 255, 0, 0, 0, 255, 255, 255, 255, 40, 90, 200];
         let raw = RawFrame {
-            width: 4,
+            width: 5,
             height: 1,
             channels: 3,
             data: &data,
         };
-        let g = to_grey(&raw).unwrap();
-        assert_eq!(g.data(), &[76, 149, 28, 255]);
+        let g = to_grey(&raw, Grey::Luma).unwrap();
+        assert_eq!(g.data(), &[76, 149, 28, 255, 87]);
+        let g = to_grey(&raw, Grey::Max).unwrap();
+        assert_eq!(g.data(), &[255, 255, 255, 255, 200]);
+        let rgba: Vec<u8> = data
+            .chunks(3)
+            .flat_map(|p| [p[0], p[1], p[2], 7])
+            .collect();
+        let raw = RawFrame {
+            channels: 4,
+            data: &rgba,
+            ..raw
+        };
+        assert_eq!(to_grey(&raw, Grey::Max).unwrap().data(), g.data());
     }
 
     #[test]
@@ -375,19 +397,19 @@ mod tests {
             data: d,
         };
         assert!(matches!(
-            to_grey(&raw(0, 5, 1, &[])),
+            to_grey(&raw(0, 5, 1, &[]), Grey::Max),
             Err(FrameError::Empty { .. })
         ));
         assert!(matches!(
-            to_grey(&raw(2, 2, 1, &[1, 2, 3])),
+            to_grey(&raw(2, 2, 1, &[1, 2, 3]), Grey::Max),
             Err(FrameError::BadLength { .. })
         ));
         assert!(matches!(
-            to_grey(&raw(1, 1, 2, &[1, 2])),
+            to_grey(&raw(1, 1, 2, &[1, 2]), Grey::Max),
             Err(FrameError::Channels(2))
         ));
         assert!(matches!(
-            to_grey(&raw(MAX_SIDE_PX + 1, 1, 1, &[])),
+            to_grey(&raw(MAX_SIDE_PX + 1, 1, 1, &[]), Grey::Max),
             Err(FrameError::TooLarge { .. })
         ));
     }
