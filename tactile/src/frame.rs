@@ -376,10 +376,7 @@ mod tests {
         assert_eq!(g.data(), &[76, 149, 28, 255, 87]);
         let g = to_grey(&raw, Grey::Max).unwrap();
         assert_eq!(g.data(), &[255, 255, 255, 255, 200]);
-        let rgba: Vec<u8> = data
-            .chunks(3)
-            .flat_map(|p| [p[0], p[1], p[2], 7])
-            .collect();
+        let rgba: Vec<u8> = data.chunks(3).flat_map(|p| [p[0], p[1], p[2], 7]).collect();
         let raw = RawFrame {
             channels: 4,
             data: &rgba,

@@ -1595,7 +1595,11 @@ fn plain_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments
         lo = lo.min(row(j)[0]).min(row(j)[win.span - 1]);
     }
     let [a, b, c, d] = win.peak;
-    let hi = (c..=d).flat_map(|j| &row(j)[a..=b]).copied().max().unwrap_or(0);
+    let hi = (c..=d)
+        .flat_map(|j| &row(j)[a..=b])
+        .copied()
+        .max()
+        .unwrap_or(0);
     let cut = half_maximum(lo, hi, min_contrast)?;
     let (mut sw, mut sx, mut sy) = (0u32, 0u32, 0u32);
     for j in 0..win.rows {
