@@ -922,6 +922,40 @@ mod tests {
     }
 
     #[test]
+    fn a_rest_frame_followed_on_itself_stays_where_the_rest_says() {
+        // Following a rest frame from the rest markers, in their windows,
+        // must find every one where the calibration put it, or a still
+        // frame has moved markers: on the domes' crowded outer rings a
+        // centroid window reaches the neighbours.
+        for cat in [Category::Dome, Category::TacTip, Category::Nominal] {
+            let sensor = cat.sensor(640, 480, 5);
+            let rest = rest_frame(&sensor, 99).image;
+            let cal = calibrate(&[rest.clone()], &Params::default()).unwrap();
+            let reach_px = crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px;
+            let found = markers::follow_all(
+                &rest,
+                &cal.detector,
+                &cal.rest_markers,
+                &cal.centroid_radii_px,
+                reach_px,
+            );
+            let off: Vec<f64> = found
+                .iter()
+                .zip(&cal.rest_markers)
+                .filter_map(|(f, r)| f.map(|f| (f.pos.x - r.x).hypot(f.pos.y - r.y)))
+                .collect();
+            assert_eq!(
+                off.len(),
+                cal.rest_markers.len(),
+                "{cat:?}: every rest marker is followed"
+            );
+            let worst = off.iter().copied().fold(0.0, f64::max);
+            let over = off.iter().filter(|&&d| d > 2.0 * SETTLED_PX).count();
+            assert!(over == 0, "{cat:?}: {over} markers off, worst {worst} px");
+        }
+    }
+
+    #[test]
     fn several_rest_frames_average_out_marker_noise() {
         let mut sensor = Category::Nominal.sensor(640, 480, 2);
         sensor.noise_sigma = 8.0;
