@@ -930,7 +930,7 @@ mod tests {
         for cat in [Category::Dome, Category::TacTip, Category::Nominal] {
             let sensor = cat.sensor(640, 480, 5);
             let rest = rest_frame(&sensor, 99).image;
-            let cal = calibrate(&[rest.clone()], &Params::default()).unwrap();
+            let cal = calibrate(std::slice::from_ref(&rest), &Params::default()).unwrap();
             let reach_px = crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px;
             let found = markers::follow_all(
                 &rest,

@@ -88,6 +88,16 @@ pub struct Contact {
     pub source: Source,
 }
 
+/// One connected region of [`segment`]'s flood fill: its cells, its lowest
+/// cell and score, and its moments `(sum w, sum w i, sum w j)` with each
+/// cell weighted by how far its score lies below the threshold.
+struct Flood {
+    cells: usize,
+    low: (usize, usize),
+    depth: f32,
+    mass: [f64; 3],
+}
+
 /// Stage 4 entry: the largest low-density region of `map` (inside its ROI and
 /// the mask), or `None` when there is none of at least `min_area_mm2`.
 /// `rest` and `mask` are on the same grid as `map`.
@@ -120,7 +130,7 @@ pub fn segment(
     let usable = |i: usize, j: usize| roi.contains(i, j) && mask[j * g.nx + i];
     let mut seen = vec![false; n];
     let mut stack = Vec::new();
-    let mut best: Option<(usize, (usize, usize), f32, [f64; 3])> = None;
+    let mut best: Option<Flood> = None;
     for j in roi.j0..roi.j1 {
         for i in roi.i0..roi.i1 {
             let k = j * g.nx + i;
@@ -163,12 +173,22 @@ pub fn segment(
                     }
                 }
             }
-            if best.is_none_or(|b| count > b.0) {
-                best = Some((count, low.0, low.1, mass));
+            if best.as_ref().is_none_or(|b| count > b.cells) {
+                best = Some(Flood {
+                    cells: count,
+                    low: low.0,
+                    depth: low.1,
+                    mass,
+                });
             }
         }
     }
-    let (cells, (i, j), depth, mass) = best?;
+    let Flood {
+        cells,
+        low: (i, j),
+        depth,
+        mass,
+    } = best?;
     let step = g.step_px as f64;
     let area_mm2 = cells as f64 * step * step * mm_per_px * mm_per_px;
     if area_mm2 < params.min_area_mm2 {
