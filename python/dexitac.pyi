@@ -17,7 +17,8 @@ import numpy.typing as npt
 __version__: str
 
 Frame = npt.NDArray[np.uint8]
-"""uint8, C-contiguous, (H, W) grey or (H, W, 3) RGB / (H, W, 4) RGBA."""
+"""uint8, C-contiguous, (H, W) grey or (H, W, 3) RGB / (H, W, 4) RGBA (made grey
+by the config's ``[frame] grey``: the brightest channel by default, or ``"luma"``)."""
 
 Config = Union[None, str, "os.PathLike[str]", Mapping[str, Any]]
 """None (the paper's parameters), TOML text (str), a TOML file (pathlib.Path)
