@@ -38,7 +38,7 @@ pub struct AnalyzeArgs {
     /// default a rest with holes (a pressed rest, or the median image of
     /// taps) is replaced by one estimated from the frames, as
     /// --rest-from-frames, when there are at least 16 frames and that
-    /// estimate has fewer holes.
+    /// estimate has fewer holes and at least as many markers.
     #[arg(long, conflicts_with = "rest_from_frames")]
     keep_rest: bool,
     /// Sensor config (TOML); defaults to the paper's parameters.
@@ -178,7 +178,7 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
             .then(|| estimate_rest(&spaced(), &params, (rest_w, rest_h)))
             .flatten();
         match estimate {
-            Some(est) if est.gaps_px.len() < cal.gaps_px.len() => {
+            Some(est) if est.fills_holes_of(&cal) => {
                 tracing::warn!(
                     "{w}. Using the rest estimated from the frames instead ({} markers, {} such \
                      places; --keep-rest keeps the given one)",
