@@ -23,7 +23,6 @@ with the machine, the command and the date.
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime as dt
 import math
 import os
@@ -31,28 +30,18 @@ import platform
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from run import fnum, read_csv, run_dexitac  # noqa: E402
 
 TARGETS = (
     "Targets (the issue): markers within ±1 % of the true count, no false contact, "
     "≥97 % of contacts found, centre error median ≤0.5 px and p95 ≤3 px in every category, "
     "median ≤0.25 ms per frame."
 )
-
-
-def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def fnum(s: str) -> float:
-    try:
-        return float(s)
-    except (TypeError, ValueError):
-        return math.nan
 
 
 def machine() -> str:
@@ -76,16 +65,9 @@ def machine() -> str:
 
 
 def run_category(dexitac: str, d: Path) -> tuple[list[dict], float, str]:
-    frames = sorted((d / "frames").glob("*.png"))
+    """``dexitac analyze --rest rest.png`` on a category's frames (eval/run.py's runner)."""
     with tempfile.TemporaryDirectory() as tmp:
-        pred = Path(tmp) / "pred.csv"
-        cmd = [dexitac, "analyze", "-q", "--rest", str(d / "rest.png"), "--out", str(pred), *map(str, frames)]
-        t0 = time.time()
-        p = subprocess.run(cmd, capture_output=True, text=True)
-        wall = time.time() - t0
-        note = "" if p.returncode == 0 else f"exit {p.returncode}: {p.stderr.strip()[:300]}"
-        rows = read_csv(pred) if pred.exists() else []
-    return rows, wall, note
+        return run_dexitac(dexitac, d, d / "rest.png", Path(tmp), d.name, None)
 
 
 def score(pairs: list[tuple[dict, dict]]) -> dict:

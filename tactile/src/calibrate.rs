@@ -176,8 +176,9 @@ pub fn calibrate_mapped(
     };
     // The rest is what the live pipeline finds on the rest frames: the
     // markers settled where following finds them, the ones it cannot follow
-    // dropped, and the rest density, mask and centroid windows made from
-    // those (area, pitch, surface and search window stay the search's).
+    // dropped, each in the centroid window it was settled in, and the rest
+    // density and mask made from those (area, pitch, surface and search
+    // window stay the search's).
     let mut cal = cal;
     let settled = settle(rest, &cal);
     if settled.len() < MIN_REST_MARKERS {
