@@ -154,8 +154,17 @@ fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
         "{}",
         stderr(&o)
     );
+    // The board acks a command before the control tick that applies it
+    // (sim/tests/link_sim.rs, `wait_for`): the host may exit between the
+    // two, so the state is read once two more ticks have run.
+    let tick_ms = u64::from(SimMcuConfig::default().firmware.tick_period_ms.max(1));
+    let exited_ms = mcu.snapshot().time_ms;
+    let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    while mcu.snapshot().time_ms < exited_ms + 2 * tick_ms && std::time::Instant::now() < until {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+    }
     let s = mcu.snapshot();
-    assert_eq!(s.state, ArmState::Disarmed);
+    assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
     assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
 }
 
