@@ -154,9 +154,10 @@ fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
         "{}",
         stderr(&o)
     );
-    // The board acks a command before the control tick that applies it
-    // (sim/tests/link_sim.rs, `wait_for`): the host may exit between the
-    // two, so the state is read once two more ticks have run.
+    // The simulated board writes its ack to the port before it publishes
+    // its snapshot (sim/src/mcu.rs, the MCU thread's loop): the host may
+    // exit on the disarm's ack before the snapshot shows it, so the state
+    // is read once two more ticks have been published.
     let tick_ms = u64::from(SimMcuConfig::default().firmware.tick_period_ms.max(1));
     let exited_ms = mcu.snapshot().time_ms;
     let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
