@@ -187,7 +187,7 @@ pub fn calibrate_mapped(
         });
     }
     (cal.rest_markers, cal.centroid_radii_px) = settled.into_iter().unzip();
-    (cal.rest_density, cal.mask, _) = reference(&cal.rest_markers, &cal.density, &cal.detector);
+    (cal.rest_density, cal.mask) = reference(&cal.rest_markers, &cal.density, &cal.detector);
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
     Ok(cal)
@@ -508,7 +508,8 @@ fn finish(
         step_px: params.density.grid_step_px as usize,
         truncate_sigmas: params.density.truncate_sigmas,
     };
-    let (rest_density, mask, centroid_radii_px) = reference(&rest_markers, &density, &detector);
+    let (rest_density, mask) = reference(&rest_markers, &density, &detector);
+    let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
     Ok(Calibration {
         width: w,
         height: h,
@@ -652,14 +653,14 @@ pub fn rest_gaps(
     gaps
 }
 
-/// What the rest markers give every frame: the rest density, the sensing
-/// mask on its grid (where the rest density is, inside the detector's
-/// area) and each marker's centroid window radius.
+/// What the rest markers give every frame's density: the rest density and
+/// the sensing mask on its grid (where the rest density is, inside the
+/// detector's area).
 fn reference(
     rest_markers: &[PointPx],
     density: &DensitySetup,
     detector: &Detector,
-) -> (DensityMap, Vec<bool>, Vec<f64>) {
+) -> (DensityMap, Vec<bool>) {
     let rest_density = density::estimate(rest_markers, density, None);
     let mut mask = sensing_mask(&rest_density);
     let grid = density.grid();
@@ -669,8 +670,7 @@ fn reference(
             *m &= area.contains(p);
         }
     }
-    let centroid_radii_px = markers::centroid_radii(rest_markers, detector.radius_px);
-    (rest_density, mask, centroid_radii_px)
+    (rest_density, mask)
 }
 
 /// The bounding box of the rest markers grown by a pitch, the marker size and

@@ -248,8 +248,8 @@ pub fn segment(
 /// from 19.6 to 4.4 px (nominal) and the large contacts' median from 23.1
 /// to 4.1 px; the real cr taps' LOO R^2 rose from 0.95 / 0.91 to
 /// 0.97 / 0.95; the generator's sheared contacts, centred on the region,
-/// moved from 1.8 to 2.2 px median. 2 kept half of the renderer's gain, 1
-/// measured the same as 1.5.
+/// moved from 1.8 to 2.2 px median. At 2 the renderer's nominal p95 was
+/// 7.3 px instead of 4.4; 1 measured the same as 1.5.
 pub const CENTROID_RADIUS_H: f64 = 1.5;
 
 /// Upper bound of the quadratic-fit window, grid cells (a kernel width h of

@@ -115,25 +115,33 @@ impl PointIndex {
         q: PointPx,
         radius_px: f64,
     ) -> impl Iterator<Item = (usize, f64)> + 'a {
-        let finite = q.is_finite();
-        // Truncation toward zero differs from floor only in (-1, 0), where
-        // the 3x3 search still covers the right cells.
-        let (ci, cj) = ((q.x / self.cell_px) as i64, (q.y / self.cell_px) as i64);
+        let (cols, rows) = self.cells_around(q);
         let r2 = radius_px * radius_px;
-        let (nx, ny) = (self.nx as i64, self.ny as i64);
-        (cj - 1..=cj + 1)
-            .filter(move |&j| finite && (0..ny).contains(&j))
-            .flat_map(move |j| {
-                (ci - 1..=ci + 1)
-                    .filter(move |&i| (0..nx).contains(&i))
-                    .map(move |i| j as usize * self.nx + i as usize)
-            })
+        rows.flat_map(move |j| cols.clone().map(move |i| j * self.nx + i))
             .flat_map(move |c| &self.items[self.starts[c] as usize..self.starts[c + 1] as usize])
             .filter_map(move |&n| {
                 let p = points[n as usize];
                 let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
                 (d2 <= r2).then_some((n as usize, d2))
             })
+    }
+
+    /// The cells of the 3x3 around `q`'s cell that lie in the grid: the
+    /// column and row ranges (empty for a non-finite `q`). Truncation toward
+    /// zero differs from floor only in (-1, 0), where the 3x3 still covers
+    /// the right cells.
+    fn cells_around(&self, q: PointPx) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+        if !q.is_finite() {
+            return (0..0, 0..0);
+        }
+        let span = |c: i64, n: usize| {
+            let end = c.saturating_add(2).clamp(0, n as i64) as usize;
+            (c.saturating_sub(1).max(0) as usize)..end
+        };
+        (
+            span((q.x / self.cell_px) as i64, self.nx),
+            span((q.y / self.cell_px) as i64, self.ny),
+        )
     }
 
     fn nearest_but(
@@ -145,16 +153,11 @@ impl PointIndex {
     ) -> Option<(usize, f64)> {
         // `within`, written out as loops: the iterator chain cost 5x the
         // instructions on this hot path (search and tracking).
-        if !q.is_finite() {
-            return None;
-        }
-        let (ci, cj) = ((q.x / self.cell_px) as i64, (q.y / self.cell_px) as i64);
-        let (i0, i1) = ((ci - 1).max(0), (ci + 1).min(self.nx as i64 - 1));
-        let (j0, j1) = ((cj - 1).max(0), (cj + 1).min(self.ny as i64 - 1));
+        let (cols, rows) = self.cells_around(q);
         let mut best: Option<(usize, f64)> = None;
-        for j in j0..=j1 {
-            for i in i0..=i1 {
-                let c = j as usize * self.nx + i as usize;
+        for j in rows {
+            for i in cols.clone() {
+                let c = j * self.nx + i;
                 let (a, b) = (self.starts[c] as usize, self.starts[c + 1] as usize);
                 for &n in &self.items[a..b] {
                     let n = n as usize;
