@@ -154,17 +154,9 @@ fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
         "{}",
         stderr(&o)
     );
-    // The simulated board writes its ack to the port before it publishes
-    // its snapshot (sim/src/mcu.rs, the MCU thread's loop): the host may
-    // exit on the disarm's ack before the snapshot shows it, so the state
-    // is read once two more ticks have been published.
-    let tick_ms = u64::from(SimMcuConfig::default().firmware.tick_period_ms.max(1));
-    let exited_ms = mcu.snapshot().time_ms;
-    let until = std::time::Instant::now() + std::time::Duration::from_secs(2);
-    while mcu.snapshot().time_ms < exited_ms + 2 * tick_ms && std::time::Instant::now() < until {
-        std::thread::sleep(std::time::Duration::from_millis(1));
-    }
-    let s = mcu.snapshot();
+    // The host exits on the disarm's ack, which the simulated board writes
+    // before it publishes the snapshot that shows it.
+    let s = mcu.snapshot_after_ticks(std::time::Duration::from_secs(2));
     assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
     assert_eq!(s.chambers, [ValveState::Hold; CHAMBER_COUNT]);
 }

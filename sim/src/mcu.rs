@@ -190,6 +190,8 @@ struct Shared {
 /// A running simulated MCU; stops when dropped.
 pub struct SimMcu {
     port_path: PathBuf,
+    /// The control tick, ms.
+    tick_ms: u64,
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<io::Result<()>>>,
@@ -266,6 +268,7 @@ impl SimMcu {
             + Send
             + 'static,
     ) -> io::Result<SimMcu> {
+        let tick_ms = u64::from(config.firmware.tick_period_ms.max(1));
         let hw = new_hw(&config);
         let controller = new_controller(&config, &config.calibration_page, ResetCause::PowerOn);
         let shared = Arc::new(Mutex::new(Shared {
@@ -282,6 +285,7 @@ impl SimMcu {
         };
         Ok(SimMcu {
             port_path,
+            tick_ms,
             shared,
             stop,
             thread: Some(thread),
@@ -296,6 +300,23 @@ impl SimMcu {
     /// The latest outputs and state.
     pub fn snapshot(&self) -> McuSnapshot {
         lock(&self.shared).snapshot
+    }
+
+    /// The outputs and state once two more control ticks have been
+    /// published (waiting up to `timeout`, then the latest). The MCU thread
+    /// writes its replies to the port before it publishes the snapshot that
+    /// shows their effect: a host that exits on a command's ack can leave
+    /// [`SimMcu::snapshot`] a pass behind it.
+    pub fn snapshot_after_ticks(&self, timeout: Duration) -> McuSnapshot {
+        let due_ms = self.snapshot().time_ms + 2 * self.tick_ms;
+        let until = std::time::Instant::now() + timeout;
+        loop {
+            let s = self.snapshot();
+            if s.time_ms >= due_ms || std::time::Instant::now() >= until {
+                return s;
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// The sensor calibration the controller applies now (as its hello
