@@ -93,6 +93,8 @@ OPENCV_PARAMS = {
                          filterByInertia=True, minInertiaRatio=0.1,
                          filterByConvexity=True, minConvexity=0.6),
 }
+# eval/raw_taps.py moves tactip_raw's own pixels: the same detector.
+OPENCV_PARAMS["tactip_raw_taps"] = OPENCV_PARAMS["tactip_raw_taps_light"] = OPENCV_PARAMS["tactip_raw"]
 
 DOH_PARAMS = {
     # The Bristol DoHDetector sigmas (5-6) fit the binarised pins (radius
@@ -111,6 +113,7 @@ DOH_PARAMS = {
     # 2026-11-23 run); 0.002 has no off-dot markers but finds ~146.
     "gelslim_dots": dict(min_sigma=2.0, max_sigma=4.0, num_sigma=5, threshold=0.0016),
 }
+DOH_PARAMS["tactip_raw_taps"] = DOH_PARAMS["tactip_raw_taps_light"] = DOH_PARAMS["tactip_raw"]
 
 
 def to_grey(img: np.ndarray) -> np.ndarray:

@@ -73,3 +73,7 @@ fi
 
 "$python" eval/layout.py --shear "$shear" --tip "$tip" --gelslim "$gelslim" \
   --out data/real --frames "$frames" --seed "$seed"
+# Raw-looking taps (tactip_raw's pins placed as the cr taps put theirs),
+# with the raw frame's light and with a light of their own per frame.
+"$python" eval/raw_taps.py --data data/real
+"$python" eval/raw_taps.py --data data/real --light

@@ -67,6 +67,8 @@ import baselines  # noqa: E402
 cv2.setNumThreads(1)
 
 ALL_SETS = ["tactip_shear_cr", "tactip_shear_franka", "tactip_raw", "gelslim_dots"]
+# Made by eval/raw_taps.py from the sets above; run when present.
+DERIVED_SETS = ["tactip_raw_taps", "tactip_raw_taps_light"]
 TOOLS = ["dexitac default", "dexitac tuned", "opencv", "doh"]
 
 
@@ -250,6 +252,9 @@ def metrics(rows: list[dict], labels: list[dict], meta: dict, wall_s: float) -> 
     if not rows:
         return m
     n = np.array([fnum(r["n_markers"]) for r in rows])
+    if labels and "pins" in labels[0]:
+        # A per-frame pin count (eval/raw_taps.py: the pins each frame has).
+        pins = np.array([fnum(lab[r["frame"]]["pins"]) for r in rows])
     err = np.abs(n - pins) / pins
     m.update(n_med=float(np.median(n)), n_min=float(n.min()), n_max=float(n.max()),
              in1=float((err <= 0.01).mean()), in2=float((err <= 0.02).mean()))
@@ -327,7 +332,8 @@ def stage_table(results: list[dict]) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", default="target/release/dexitac")
-    ap.add_argument("--sets", nargs="+", default=ALL_SETS)
+    ap.add_argument("--sets", nargs="+", default=None,
+                    help=f"default: {' '.join(ALL_SETS)}, and {' '.join(DERIVED_SETS)} when laid out")
     ap.add_argument("--data", type=Path, default=Path("data/real"))
     ap.add_argument("--out", type=Path, default=Path("eval/results"))
     ap.add_argument("--rest-modes", nargs="+", default=["level", "median"], choices=["level", "median"],
@@ -336,6 +342,8 @@ def main() -> None:
     ap.add_argument("--tools", nargs="+", default=TOOLS, choices=TOOLS,
                     help="run only these tools (e.g. dexitac after a change, the baselines unchanged)")
     a = ap.parse_args()
+    if a.sets is None:
+        a.sets = ALL_SETS + [s for s in DERIVED_SETS if (a.data / s / "set.json").exists()]
     exe = str(Path(a.dexitac).resolve())
     if not Path(exe).is_file():
         sys.exit(f"run.py: no dexitac binary at {a.dexitac}: build it with "
