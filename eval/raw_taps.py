@@ -8,29 +8,30 @@ pipeline's *processed* frames: binarised, cropped, circle-masked. A user's
 camera gives raw frames instead: grey-white pins in a dark disc, a bright
 housing, LEDs and dust around it, some dimmer bluish pins. The one public raw
 frame (``tactip_raw``) has no taps. This script joins the two, so that the
-pipeline meets raw frames that move as real taps do:
+pipeline meets raw frames whose pins move as real taps moved them:
 
-1. For each frame of ``tactip_shear_cr``, its pins are matched to those of
-   the set's level tap (eval/run.py's ``level`` rest), and their
-   displacements, spread by a smoothed thin-plate spline, say where each
-   pixel of the tap was at rest (``backward_flow``).
-2. That backward map is carried to the raw frame by the similarity that
-   takes the processed frame's pin disc (centre and radius of its pin
-   lattice) onto the raw frame's (``pins_ref.csv``), tapered to zero between
-   the outer pins and the clamped rim so that the housing does not move.
-3. ``cv2.remap`` (bilinear, RGB) warps the raw frame with it.
+1. The raw frame's 331 pins (``pins_ref.csv``) are inpainted out of its
+   skin (``split_pins``), and each pin's own patch above that skin is kept.
+2. For each frame of ``tactip_shear_cr``, its pin centres (``pin_centres``)
+   are carried to the raw frame by the similarity that takes the processed
+   frame's pin disc (centre and radius of the level tap's lattice, the
+   level tap being eval/run.py's ``level`` rest) onto the raw frame's.
+3. At each of those places the patch of the nearest raw pin is pasted,
+   sub-pixel (``render``).
 
-Nothing of the raw frame is redrawn: pins, housing, LEDs, dust and the bluish
-pins are the camera's own pixels, moved. What it cannot show: the shading
-changes of a real tap (pins under the contact tilting and dimming), and the
-flow inside a deep contact, where the processed frame's pins merge, is
-smooth rather than exact.
+The housing, LEDs, dust, the skin and the pins' own shapes and colours
+(some bluish) are the camera's pixels. What it cannot show: the shading
+changes of a real tap (pins under the contact tilting and dimming), and
+pins a deep tap merged in the processed frame beyond splitting (then the
+frame has fewer pins: its ``pins`` label says how many).
 
 Writes ``data/real/tactip_raw_taps/`` in the layout of eval/layout.py:
-``frames/*.png`` (640x480 RGB), ``labels.csv`` (the cr labels), ``set.json``
+``frames/*.png`` (640x480 RGB), ``labels.csv`` (the cr labels and ``pins``,
+the frame's pin count, which eval/run.py scores the count against), ``set.json``
 (331 pins, no rest frame: a data set without one, as the issue's real taps).
 With ``--light`` every frame also gets its own light (0.6-1.0 gain, a linear
-gradient of up to 25 %, sensor noise), the rest left as captured.
+gradient of up to 25 %, sensor noise), so that a rest made from the
+frames (their median, or the level tap) has another light than most frames.
 Then ``eval/run.py --sets tactip_raw_taps`` scores it (the ``median`` rest
 is the issue's own protocol: the pixel-wise median of the frames, no config).
 Third-party pixels: ``data/`` is git-ignored, never commit the frames.
