@@ -17,6 +17,7 @@ use anyhow::anyhow;
 use std::path::{Path, PathBuf};
 
 use dexitac_rig::sources;
+use dexitac_tactile::calibrate;
 use dexitac_tactile::frame::GreyFrame;
 use dexitac_tactile::params::Params;
 use dexitac_tactile::sensor_setup::{self, HealthLimits, HealthReport, Verdict};
@@ -126,6 +127,17 @@ fn tune_inner(args: &TuneArgs) -> anyhow::Result<bool> {
              (check the rest frame: nothing touching, in focus, evenly lit)",
             r.pins
         );
+        // The commonest cause on data sets without a rest frame: a median
+        // image of taps, whose pins under the taps are smeared.
+        if calibrate::calibrate(std::slice::from_ref(&rest), &tuned)
+            .is_ok_and(|cal| cal.holey_rest_warning().is_some())
+        {
+            tracing::warn!(
+                "dexitac sensor tune: the rest's marker lattice has holes (a pressed rest, or \
+                 the median image of taps?): tune on a no-contact frame; without one, \
+                 `dexitac analyze --rest-from-frames` estimates the rest from the frames"
+            );
+        }
     }
     Ok(r.exact)
 }
