@@ -1634,6 +1634,7 @@ const LANES: usize = 16;
 /// 255 x (0 + ... + 15) for the y moment). Fixed-width lanes vectorise where
 /// the window's odd width (11-13 px) would not. Not inlined: inside
 /// `refine` the vectoriser gave up on such loops (3x the instructions).
+#[cfg(not(target_arch = "x86_64"))]
 #[inline(never)]
 fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
     const INDEX: [u8; LANES] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15];
@@ -1701,6 +1702,99 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
         sx,
         sy,
     })
+}
+
+/// [`narrow_moments`] in SSE2 (every x86-64 CPU has it), on the rows in
+/// place: the lane mask is one compare, the outline's minimum a few
+/// vector minima, and per row of weights one saturating subtract, one
+/// mask, one sum of absolute differences (the row's weight, for `sum w` and
+/// `sum w y`) and two multiply-adds by the lane index (`sum w x`). Exact
+/// (the proptest against [`plain_moments`]): every partial sum stays below
+/// 2^20. Measured with callgrind on the other renderer's 24 nominal dome
+/// frames (955 markers): 1000 -> 610 instructions a window, the pipeline
+/// 4.25 M -> 3.68 M a frame (BENCHMARKS.md, session 12).
+#[cfg(target_arch = "x86_64")]
+#[inline(never)]
+fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
+    use std::arch::x86_64::{
+        __m128i, _mm_add_epi32, _mm_add_epi64, _mm_and_si128, _mm_andnot_si128, _mm_cmplt_epi8,
+        _mm_cvtsi128_si32, _mm_cvtsi128_si64, _mm_loadu_si128, _mm_madd_epi16, _mm_min_epu8,
+        _mm_mul_epu32, _mm_or_si128, _mm_sad_epu8, _mm_set1_epi32, _mm_set1_epi8, _mm_setr_epi16,
+        _mm_setr_epi8, _mm_setzero_si128, _mm_shuffle_epi32, _mm_srli_si128, _mm_storeu_si128,
+        _mm_subs_epu8, _mm_unpackhi_epi64, _mm_unpackhi_epi8, _mm_unpacklo_epi8,
+    };
+    let (rows, span) = (win.rows.clamp(1, LANES), win.span.clamp(1, LANES));
+    // Every row must have LANES bytes: checked once, on the last.
+    let last = (rows - 1).checked_mul(win.stride)?.checked_add(win.first)?;
+    if last.checked_add(LANES)? > data.len() {
+        return None;
+    }
+    let row_at = |j: usize| win.first + j * win.stride;
+    // The 3x3 (at most) around the guess: its first, middle and last
+    // columns of each of its rows.
+    let [a, b, c, d] = win.peak;
+    let (b, d) = (b.min(span - 1), d.min(rows - 1));
+    let (a, c) = (a.min(b), c.min(d));
+    let mid = (a + 1).min(b);
+    let hi = (c..=d).fold(0u8, |m, j| {
+        let r = row_at(j);
+        m.max(data[r + a]).max(data[r + mid]).max(data[r + b])
+    });
+    // SAFETY: SSE2 is part of x86-64; every load reads the LANES bytes at a
+    // row start j < rows, all inside `data` (checked above), or a local
+    // array of LANES bytes.
+    unsafe {
+        let row = |j: usize| -> __m128i { _mm_loadu_si128(data.as_ptr().add(row_at(j)).cast()) };
+        let zero = _mm_setzero_si128();
+        let ones = _mm_set1_epi8(-1);
+        let index = _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+        let keep = _mm_cmplt_epi8(index, _mm_set1_epi8(span as i8));
+        // The outline: the first and last rows (the lanes past `span`
+        // lifted out of the way), and the first and last columns of the
+        // column minima.
+        let mut col_min = ones;
+        for j in 0..rows {
+            col_min = _mm_min_epu8(col_min, row(j));
+        }
+        let off = _mm_andnot_si128(keep, ones);
+        let mut ends = _mm_min_epu8(_mm_or_si128(row(0), off), _mm_or_si128(row(rows - 1), off));
+        ends = _mm_min_epu8(ends, _mm_srli_si128::<8>(ends));
+        ends = _mm_min_epu8(ends, _mm_srli_si128::<4>(ends));
+        ends = _mm_min_epu8(ends, _mm_srli_si128::<2>(ends));
+        ends = _mm_min_epu8(ends, _mm_srli_si128::<1>(ends));
+        let mut cols = [0u8; LANES];
+        _mm_storeu_si128(cols.as_mut_ptr().cast(), col_min);
+        let lo = (_mm_cvtsi128_si32(ends) as u8)
+            .min(cols[0])
+            .min(cols[span - 1]);
+        let cut = half_maximum(lo, hi, min_contrast)?;
+        let cut_v = _mm_set1_epi8(cut as i8);
+        let index_lo = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
+        let index_hi = _mm_setr_epi16(8, 9, 10, 11, 12, 13, 14, 15);
+        let (mut sw, mut sy, mut sx) = (zero, zero, zero);
+        for j in 0..rows {
+            let w = _mm_and_si128(_mm_subs_epu8(row(j), cut_v), keep);
+            // Two 64-bit lanes: the weights of lanes 0-7 and of 8-15.
+            let row_w = _mm_sad_epu8(w, zero);
+            sw = _mm_add_epi64(sw, row_w);
+            sy = _mm_add_epi64(sy, _mm_mul_epu32(row_w, _mm_set1_epi32(j as i32)));
+            // Weights (<= 255) times lanes (<= 15), in pairs: i32 lanes.
+            let x_lo = _mm_madd_epi16(_mm_unpacklo_epi8(w, zero), index_lo);
+            let x_hi = _mm_madd_epi16(_mm_unpackhi_epi8(w, zero), index_hi);
+            sx = _mm_add_epi32(sx, _mm_add_epi32(x_lo, x_hi));
+        }
+        let sum64 = |v| (_mm_cvtsi128_si64(v) + _mm_cvtsi128_si64(_mm_unpackhi_epi64(v, v))) as u32;
+        let sx = _mm_add_epi32(sx, _mm_shuffle_epi32::<0b01_00_11_10>(sx));
+        let sx = _mm_add_epi32(sx, _mm_shuffle_epi32::<0b10_11_00_01>(sx));
+        Some(Moments {
+            lo,
+            hi,
+            cut,
+            sw: sum64(sw),
+            sx: _mm_cvtsi128_si32(sx) as u32,
+            sy: sum64(sy),
+        })
+    }
 }
 
 #[cfg(test)]
