@@ -112,6 +112,10 @@ class TuneResult:
     def tried(self) -> int:
         """Settings tried."""
     @property
+    def holes(self) -> bool:
+        """The rest's marker lattice has holes with the tuned setting (a pressed rest, or the
+        median image of taps): the count is not to be trusted."""
+    @property
     def summary(self) -> str:
         """One line, as ``dexitac sensor tune`` logs it."""
 

@@ -496,6 +496,7 @@ pub fn tune_on(rest: &GreyFrame, pins: usize, base: &Params) -> PyResult<TuneRes
         exact: r.exact,
         ratio_range: r.ratio_range,
         tried: r.tried,
+        holes: r.holes,
         summary,
     })
 }
@@ -646,6 +647,10 @@ pub struct TuneResult {
     /// Settings tried.
     #[pyo3(get)]
     tried: usize,
+    /// The rest's marker lattice has holes with the tuned setting (a pressed
+    /// rest, or the median image of taps): the count is not to be trusted.
+    #[pyo3(get)]
+    holes: bool,
     /// One line, as `dexitac sensor tune` logs it.
     #[pyo3(get)]
     summary: String,

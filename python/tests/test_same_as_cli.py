@@ -147,6 +147,7 @@ def test_tune_matches_sensor_tune(nominal, cli, tmp_path):
                 ok_codes=(0, 1))
     r = sensor.tune(pins=pins)
     assert r.exact == (p.returncode == 0)
+    assert r.holes is False  # an untouched synthetic rest
     settings = lambda text: [l for l in text.splitlines() if not l.startswith("#")]  # noqa: E731
     assert settings(r.config_toml) == settings(out.read_text())
     assert settings(dexitac.tune(nominal.rest, pins).config_toml) == settings(r.config_toml)

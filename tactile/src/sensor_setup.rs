@@ -16,11 +16,11 @@
 //! least one step either side, so a config that already works changes
 //! least; else it keeps the widest run. When no setting finds the count at
 //! the configured `markers.min_contrast`, it also tries other contrasts
-//! (2..=24 grey levels). An exact count is kept only when the calibration
-//! with that setting keeps it too, on a lattice without holes (`confirm`:
-//! a setting that counts smeared blobs on a median image of taps to the pin
-//! count is not a detector of the pins). Without an exact match it returns
-//! the closest count, marked not exact.
+//! (2..=24 grey levels). A count is what the calibration with that setting
+//! keeps, on a lattice without holes (`confirm`: a setting that counts
+//! smeared blobs on a median image of taps to the pin count is not a
+//! detector of the pins). Without an exact match it returns the closest
+//! count, marked not exact, a setting whose lattice has no holes first.
 //!
 //! # Health ([`health`])
 //!
@@ -115,6 +115,10 @@ pub struct TuneResult {
     pub ratio_range: Option<(f32, f32)>,
     /// Settings tried.
     pub tried: usize,
+    /// The calibration with these parameters finds holes in the rest's
+    /// marker lattice ([`Calibration::holey_rest_warning`]): a pressed
+    /// rest, the median image of taps, or a detector that misses pins.
+    pub holes: bool,
 }
 
 impl TuneResult {
@@ -129,9 +133,14 @@ impl TuneResult {
         let margin = self.ratio_range.map_or(String::new(), |(lo, hi)| {
             format!(" (exact for {lo:.2}..={hi:.2})")
         });
+        let holes = if self.holes {
+            "; the rest's lattice has holes with it"
+        } else {
+            ""
+        };
         format!(
             "{} of {} pins found (the base config found {before}); lobe_px = {lobe}, \
-             strength_ratio = {:.2}{margin}, min_contrast = {}; {} settings tried",
+             strength_ratio = {:.2}{margin}, min_contrast = {}; {} settings tried{holes}",
             self.found,
             self.pins,
             self.markers.strength_ratio,
@@ -199,13 +208,14 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
                 exact: found == pins,
                 ratio_range: range,
                 tried: 0,
+                holes: false,
             });
             if let Some(mut c) = candidate {
-                if c.exact && better(&c, best.as_ref()) {
-                    confirm(&mut c, rest, base);
-                }
                 if better(&c, best.as_ref()) {
-                    best = Some(c);
+                    confirm(&mut c, rest, base);
+                    if better(&c, best.as_ref()) {
+                        best = Some(c);
+                    }
                 }
             }
             if best.as_ref().is_some_and(has_margin) {
@@ -221,27 +231,26 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
     Ok(best)
 }
 
-/// An exact count must also be what the calibration keeps of it: within
+/// A count must also be what the calibration keeps of it: within
 /// [`CONFIRM_TOLERANCE`] of the pins, on a lattice without holes
-/// ([`Calibration::holey_rest_warning`]). Otherwise `c` is marked not
-/// exact, with the calibration's count as `found`. Measured: on the median
-/// image of the raw-looking TacTip taps (eval/raw_taps.py; the pins under
-/// the taps smeared), lobe 15 px counted 331 blobs for 331 pins, of which
-/// the calibration kept 57 at a pitch of 4.3 px, and every frame then had
-/// 82-140 markers.
+/// ([`Calibration::holey_rest_warning`]). Otherwise `c` is not exact, its
+/// `found` is the calibration's count, and `holes` says whether the
+/// lattice has them. Measured: on the median image of the raw-looking
+/// TacTip taps (eval/raw_taps.py; the pins under the taps smeared), lobe
+/// 15 px counted 331 blobs for 331 pins, of which the calibration kept 57
+/// at a pitch of 4.3 px, and every frame then had 82-140 markers.
 fn confirm(c: &mut TuneResult, rest: &GreyFrame, base: &Params) {
     let params = Params {
         markers: c.markers.clone(),
         ..base.clone()
     };
-    let kept = match calibrate::calibrate(std::slice::from_ref(rest), &params) {
-        Ok(cal) if cal.holey_rest_warning().is_none() => cal.rest_markers.len(),
-        // Holes: the count is off by them, whatever the markers.
-        Ok(cal) => cal.rest_markers.len().min(c.pins.saturating_sub(1)),
-        Err(_) => 0,
+    let (kept, holes) = match calibrate::calibrate(std::slice::from_ref(rest), &params) {
+        Ok(cal) => (cal.rest_markers.len(), cal.holey_rest_warning().is_some()),
+        Err(_) => (0, false),
     };
+    c.holes = holes;
     let tolerance = (CONFIRM_TOLERANCE * c.pins as f64).ceil() as usize;
-    if kept.abs_diff(c.pins) > tolerance {
+    if holes || kept.abs_diff(c.pins) > tolerance {
         (c.exact, c.found, c.ratio_range) = (false, kept, None);
     }
 }
@@ -311,8 +320,9 @@ fn pick(counts: &[(f32, usize)], pins: usize) -> Option<Pick> {
         .map(|&(r, n)| (r, n, None))
 }
 
-/// True when `c` beats `best`: exact before inexact, then a wider margin
-/// (exact) or a closer count (inexact).
+/// True when `c` beats `best`: exact before inexact, a lattice without
+/// holes before one with ([`confirm`]), then a wider margin (exact) or a
+/// closer count (inexact).
 fn better(c: &TuneResult, best: Option<&TuneResult>) -> bool {
     let Some(b) = best else { return true };
     let width = |r: &TuneResult| r.ratio_range.map_or(0.0, |(lo, hi)| hi - lo);
@@ -320,6 +330,7 @@ fn better(c: &TuneResult, best: Option<&TuneResult>) -> bool {
         (true, false) => true,
         (false, true) => false,
         (true, true) => width(c) > width(b) + 1e-6,
+        (false, false) if c.holes != b.holes => !c.holes,
         (false, false) => c.found.abs_diff(c.pins) < b.found.abs_diff(b.pins),
     }
 }
@@ -761,6 +772,7 @@ mod tests {
             exact: true,
             ratio_range: Some((0.3, 0.45)),
             tried: 12,
+            holes: false,
         };
         assert_eq!(
             r.summary(325),
@@ -817,6 +829,7 @@ mod tests {
             exact: true,
             ratio_range: Some((0.3, 0.5)),
             tried: 1,
+            holes: false,
         };
         // The intact rest: the calibration keeps the count.
         let mut c = claimed(&base.markers);
@@ -838,7 +851,7 @@ mod tests {
         let holey = GreyFrame::new(640, 480, data).unwrap();
         let mut c = claimed(&base.markers);
         confirm(&mut c, &holey, &base);
-        assert!(!c.exact, "{c:?}");
+        assert!(!c.exact && c.holes, "{c:?}");
         assert!(c.found < pins && c.ratio_range.is_none(), "{c:?}");
     }
 

@@ -17,7 +17,6 @@ use anyhow::anyhow;
 use std::path::{Path, PathBuf};
 
 use dexitac_rig::sources;
-use dexitac_tactile::calibrate;
 use dexitac_tactile::frame::GreyFrame;
 use dexitac_tactile::params::Params;
 use dexitac_tactile::sensor_setup::{self, HealthLimits, HealthReport, Verdict};
@@ -129,9 +128,7 @@ fn tune_inner(args: &TuneArgs) -> anyhow::Result<bool> {
         );
         // The commonest cause on data sets without a rest frame: a median
         // image of taps, whose pins under the taps are smeared.
-        if calibrate::calibrate(std::slice::from_ref(&rest), &tuned)
-            .is_ok_and(|cal| cal.holey_rest_warning().is_some())
-        {
+        if r.holes {
             tracing::warn!(
                 "dexitac sensor tune: the rest's marker lattice has holes (a pressed rest, or \
                  the median image of taps?): tune on a no-contact frame; without one, \
