@@ -286,9 +286,9 @@ fn luma<const C: usize>(data: &[u8]) -> Vec<u8> {
 /// The brightest of R, G and B of interleaved `C`-channel pixels.
 ///
 /// RGB on x86-64 with SSSE3 goes 16 pixels at a time ([`simd::max_rgb`]):
-/// 38 us per 640x480 frame against 200 us pixel by pixel, which the
-/// compiler does not vectorise (stride 3). The rest, and the tail, go pixel
-/// by pixel.
+/// 38 us per 640x480 frame against 225 us pixel by pixel (criterion,
+/// BENCHMARKS.md, session 12), which the compiler does not vectorise
+/// (stride 3). The rest, and the tail, go pixel by pixel.
 fn max_channel<const C: usize>(data: &[u8]) -> Vec<u8> {
     let mut out = vec![0u8; data.len() / C];
     let done = if C == 3 {
