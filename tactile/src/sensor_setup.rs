@@ -274,7 +274,7 @@ fn confirm(c: &mut TuneResult, rest: &GreyFrame, base: &Params) {
 }
 
 /// How far (a fraction of the pins) the calibration may keep fewer or more
-/// markers than the detector counted for an exact tune ([`confirm`]): it
+/// markers than the detector counted for an exact [`tune`]: it
 /// drops off-lattice blobs (an LED on the rim) the count may include.
 pub const CONFIRM_TOLERANCE: f64 = 0.01;
 
