@@ -255,7 +255,7 @@ pub fn tune(rest: &GreyFrame, pins: usize, base: &Params) -> Result<TuneResult, 
 /// lattice has them. Measured: on the median image of the raw-looking
 /// TacTip taps (eval/raw_taps.py; the pins under the taps smeared), lobe
 /// 15 px counted 331 blobs for 331 pins, of which the calibration kept 57
-/// at a pitch of 4.3 px, and the frames were then found to have 63-164
+/// at a pitch of 4.3 px, and the frames were then found to have 82-140
 /// markers each.
 fn confirm(c: &mut TuneResult, rest: &GreyFrame, base: &Params) {
     let params = Params {
