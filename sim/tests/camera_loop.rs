@@ -202,8 +202,10 @@ fn fake_cameras_feed_the_loop_through_an_unplug() {
         "{before} before, {after} after: {:?}",
         seen[0]
     );
-    std::thread::sleep(Duration::from_millis(20));
-    assert_eq!(run.mcu.snapshot().state, ArmState::Disarmed);
+    // The board acks the disarm before it publishes the snapshot that shows
+    // it: read the state two control ticks on, not after a guessed sleep.
+    let s = run.mcu.snapshot_after_ticks(Duration::from_secs(2));
+    assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
 }
 
 /// The loop ends (here: stop requested) while a camera is lost for an hour
@@ -230,6 +232,8 @@ fn the_loop_ends_promptly_while_a_camera_is_lost() {
         "run took {:?}",
         run.took
     );
-    std::thread::sleep(Duration::from_millis(20));
-    assert_eq!(run.mcu.snapshot().state, ArmState::Disarmed);
+    // The board acks the disarm before it publishes the snapshot that shows
+    // it: read the state two control ticks on, not after a guessed sleep.
+    let s = run.mcu.snapshot_after_ticks(Duration::from_secs(2));
+    assert_eq!(s.state, ArmState::Disarmed, "{s:?}");
 }
