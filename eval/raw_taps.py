@@ -43,12 +43,16 @@ import argparse
 import csv
 import json
 import shutil
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 from scipy import ndimage as ndi
 from scipy.spatial import cKDTree
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from run import level_tap  # noqa: E402  (eval/run.py's `level` rest rule)
 
 PINS = 331
 
@@ -80,13 +84,6 @@ def lattice_disc(pts: np.ndarray) -> tuple[np.ndarray, float]:
     return c, float(np.percentile(r, 97))
 
 
-def level_tap(labels: list[dict]) -> str:
-    """The lightest, most level tap: eval/run.py's ``level`` rest rule."""
-    dmax = max(float(r["depth_mm"]) for r in labels)
-    return min(labels, key=lambda r: float(r["depth_mm"]) / dmax
-               + (abs(float(r["tilt_x_deg"])) + abs(float(r["tilt_y_deg"]))) / 50.0)["frame"]
-
-
 def split_pins(raw: np.ndarray, pins: np.ndarray, pitch: float) -> tuple[np.ndarray, list[np.ndarray]]:
     """The raw frame without its pins (the skin inpainted under a disc of 0.4
     pitch around each) and each pin's own patch above that background."""
@@ -109,29 +106,31 @@ def split_pins(raw: np.ndarray, pins: np.ndarray, pitch: float) -> tuple[np.ndar
     return bg, patches
 
 
-def render(bg: np.ndarray, raw_pins: np.ndarray, patches: list[np.ndarray], at: np.ndarray) -> np.ndarray:
-    """``bg`` with a pin at each of ``at`` (raw px): the raw pin nearest to it, moved there sub-pixel."""
+def render(bg: np.ndarray, raw_pins: np.ndarray, patches: list[np.ndarray],
+           at: np.ndarray) -> tuple[np.ndarray, int]:
+    """``bg`` with a pin at each of ``at`` (raw px): the raw pin nearest to it,
+    moved there sub-pixel; and how many were pasted (a patch crossing the
+    frame's edge is left out)."""
     out = bg.astype(np.float32)
     top = np.zeros_like(out)
     h, w = bg.shape[:2]
     _, nearest = cKDTree(raw_pins).query(at)
+    pasted = 0
     for (x, y), j in zip(at, nearest):
         patch = patches[j]
         r = patch.shape[0] // 2
         # The patch holds pin j at (r, r) + its sub-pixel offset o; put that at (x, y).
         ox, oy = raw_pins[j] - np.round(raw_pins[j])
         cx, cy = int(round(x - ox)), int(round(y - oy))
-        fx, fy = x - ox - cx, y - oy - cy
-        m = np.float32([[1, 0, fx], [0, 1, fy]])
-        moved = cv2.warpAffine(patch, m, (2 * r + 1, 2 * r + 1), flags=cv2.INTER_LINEAR)
-        if moved.ndim == 2:
-            moved = moved[..., None]
         x0, y0 = cx - r, cy - r
         if x0 < 0 or y0 < 0 or x0 + 2 * r + 1 > w or y0 + 2 * r + 1 > h:
             continue
+        m = np.float32([[1, 0, x - ox - cx], [0, 1, y - oy - cy]])
+        moved = cv2.warpAffine(patch, m, (2 * r + 1, 2 * r + 1), flags=cv2.INTER_LINEAR)
         region = top[y0:y0 + 2 * r + 1, x0:x0 + 2 * r + 1]
         np.maximum(region, moved, out=region)
-    return np.clip(out + top, 0, 255).round().astype(np.uint8)
+        pasted += 1
+    return np.clip(out + top, 0, 255).round().astype(np.uint8), pasted
 
 
 def main() -> None:
@@ -151,7 +150,7 @@ def main() -> None:
         if not need.exists():
             raise SystemExit(f"raw_taps.py: {need} missing: run eval/get-data.sh first")
     labels = list(csv.DictReader(open(cr / "labels.csv", newline="")))
-    level = cr / "frames" / f"{level_tap(labels)}.png"
+    level = cr / "frames" / f"{level_tap(labels)['frame']}.png"
     if args.frames:
         labels = labels[:args.frames]
 
@@ -177,7 +176,7 @@ def main() -> None:
     for lab in labels:
         tap = cv2.imread(str(cr / "frames" / f"{lab['frame']}.png"), cv2.IMREAD_GRAYSCALE)
         at = (pin_centres(tap) - cp) * s + cr_raw
-        img = render(bg, ref, patches, at)
+        img, pins = render(bg, ref, patches, at)
         if args.light:
             gain = rng.uniform(0.6, 1.0)
             ang = rng.uniform(0, 2 * np.pi)
@@ -185,7 +184,7 @@ def main() -> None:
             noisy = img.astype(np.float32) * (gain * grad)[..., None] + rng.normal(0, 3, img.shape)
             img = np.clip(noisy, 0, 255).round().astype(np.uint8)
         cv2.imwrite(str(out / "frames" / f"{lab['frame']}.png"), img)
-        rows.append({**lab, "pins": len(at)})
+        rows.append({**lab, "pins": pins})
     with open(out / "labels.csv", "w", newline="") as f:
         wr = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         wr.writeheader()

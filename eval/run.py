@@ -90,6 +90,13 @@ def fnum(v) -> float:
 
 # ---------------------------------------------------------------- rest frames
 
+def level_tap(labels: list[dict]) -> dict:
+    """The lightest, most level tap: smallest depth/depth_max + (|tilt_x| + |tilt_y|) / 50 deg."""
+    dmax = max(fnum(r["depth_mm"]) for r in labels)
+    return min(labels, key=lambda r: fnum(r["depth_mm"]) / dmax
+               + (abs(fnum(r["tilt_x_deg"])) + abs(fnum(r["tilt_y_deg"]))) / 50.0)
+
+
 def rest_frames(set_dir: Path, meta: dict, modes: list[str]) -> dict[str, Path]:
     if (set_dir / "rest.png").exists():
         return {"rest.png": set_dir / "rest.png"}
@@ -101,10 +108,7 @@ def rest_frames(set_dir: Path, meta: dict, modes: list[str]) -> dict[str, Path]:
         cv2.imwrite(str(p), np.median(stack, axis=0).round().astype(np.uint8))
         out["median"] = p
     if "level" in modes:
-        labels = read_csv(set_dir / "labels.csv")
-        dmax = max(fnum(r["depth_mm"]) for r in labels)
-        best = min(labels, key=lambda r: fnum(r["depth_mm"]) / dmax
-                   + (abs(fnum(r["tilt_x_deg"])) + abs(fnum(r["tilt_y_deg"]))) / 50.0)
+        best = level_tap(read_csv(set_dir / "labels.csv"))
         p = set_dir / "level_rest.png"
         shutil.copyfile(set_dir / "frames" / f"{best['frame']}.png", p)
         meta.setdefault("level_rest_frame", {})[set_dir.name] = (
