@@ -407,6 +407,7 @@ pub fn params_toml(params: &Params, header: &str) -> String {
         "relative_threshold = {:?}\n",
         c.relative_threshold
     ));
+    out.push_str(&format!("relative_extent = {:?}\n", c.relative_extent));
     out.push_str(&format!(
         "absolute_threshold_per_mm2 = {:?}\n",
         c.absolute_threshold_per_mm2
