@@ -656,7 +656,10 @@ mod tests {
         no_extent.relative_extent = no_extent.relative_threshold;
         let arc = segment(&map, &rest, &[true; 1600], &no_extent, 1.0).unwrap();
         let off = (arc.centre.x - want.x).hypot(arc.centre.y - want.y);
-        assert!(off > 30.0 && arc.cells < ring.cells / 4, "{arc:?} vs {ring:?}");
+        assert!(
+            off > 30.0 && arc.cells < ring.cells / 4,
+            "{arc:?} vs {ring:?}"
+        );
     }
 
     #[test]
