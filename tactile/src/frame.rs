@@ -173,7 +173,33 @@ impl Prepared {
 
 /// Stage 1 entry: grey, crop, rescale to the working size.
 pub fn prepare(raw: &RawFrame<'_>, params: &FrameParams) -> Result<Prepared, FrameError> {
-    let grey = to_grey(raw, params.grey)?;
+    fit(to_grey(raw, params.grey)?, params)
+}
+
+/// [`prepare`] for a frame whose buffer the caller gives up (a decoded
+/// file): a grey frame already at the working size is moved, not copied.
+pub fn prepare_owned(
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: Vec<u8>,
+    params: &FrameParams,
+) -> Result<Prepared, FrameError> {
+    if channels == 1 {
+        fit(GreyFrame::new(width, height, data)?, params)
+    } else {
+        let raw = RawFrame {
+            width,
+            height,
+            channels,
+            data: &data,
+        };
+        prepare(&raw, params)
+    }
+}
+
+/// Crops and rescales a grey frame to the working size.
+fn fit(grey: GreyFrame, params: &FrameParams) -> Result<Prepared, FrameError> {
     let (cx, cy, cw, ch) = match params.crop_px {
         None => (0, 0, grey.width, grey.height),
         Some(c) => {
@@ -561,6 +587,35 @@ mod tests {
         assert_eq!(c.to_input(PointPx::new(0.0, 0.0)), PointPx::new(1.0, 1.0));
         fp.crop_px = Some([3, 0, 2, 2]);
         assert!(matches!(prepare(&raw, &fp), Err(FrameError::Crop { .. })));
+    }
+
+    #[test]
+    fn an_owned_frame_is_prepared_as_a_borrowed_one_and_moved_when_it_can_be() {
+        let grey: Vec<u8> = (0..12).collect();
+        let rgb: Vec<u8> = (0..36).map(|v| (v * 7 % 256) as u8).collect();
+        for (channels, data) in [(1, grey), (3, rgb)] {
+            let raw = RawFrame {
+                width: 4,
+                height: 3,
+                channels,
+                data: &data,
+            };
+            for fp in [params(4, 3), params(2, 2)] {
+                let want = prepare(&raw, &fp).unwrap();
+                let got = prepare_owned(4, 3, channels, data.clone(), &fp).unwrap();
+                assert_eq!(got.grey.data(), want.grey.data());
+                assert_eq!(got.map(), want.map());
+            }
+        }
+        // A grey frame at the working size keeps its buffer.
+        let data: Vec<u8> = (0..12).collect();
+        let at = data.as_ptr();
+        let p = prepare_owned(4, 3, 1, data, &params(4, 3)).unwrap();
+        assert_eq!(p.grey.data().as_ptr(), at);
+        assert!(matches!(
+            prepare_owned(4, 3, 1, vec![0; 11], &params(4, 3)),
+            Err(FrameError::BadLength { .. })
+        ));
     }
 
     #[test]

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use dexitac_tactile::area::WorkToInput;
 use dexitac_tactile::calibrate;
 use dexitac_tactile::displacement::ShiftTracker;
-use dexitac_tactile::frame::{self, GreyFrame, Prepared, RawFrame};
+use dexitac_tactile::frame::{self, GreyFrame, Prepared};
 use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::PointPx;
@@ -85,7 +85,7 @@ fn load_rests(
             }
         }
         size = Some((d.width, d.height));
-        let p = frame::prepare(&d.raw(), &params.frame)
+        let p = frame::prepare_owned(d.width, d.height, d.channels, d.data, &params.frame)
             .map_err(|e| anyhow!("rest frame {}: {e}", path.display()))?;
         map = p.map();
         prepared.push(p.grey);
@@ -126,17 +126,6 @@ struct Decoded {
     height: usize,
     channels: usize,
     data: Vec<u8>,
-}
-
-impl Decoded {
-    fn raw(&self) -> RawFrame<'_> {
-        RawFrame {
-            width: self.width,
-            height: self.height,
-            channels: self.channels,
-            data: &self.data,
-        }
-    }
 }
 
 impl AnalyzeArgs {
@@ -307,7 +296,8 @@ fn analyze_one(
         ));
     }
     let t0 = std::time::Instant::now();
-    let prepared = frame::prepare(&d.raw(), &params.frame).map_err(|e| anyhow!("{e}"))?;
+    let prepared = frame::prepare_owned(d.width, d.height, d.channels, d.data, &params.frame)
+        .map_err(|e| anyhow!("{e}"))?;
     // Frame preparation (grey, crop, rescale) counts as part of detection.
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
     let r = pipeline.run(&prepared.grey).map_err(|e| anyhow!("{e}"))?;
