@@ -678,7 +678,7 @@ mod tests {
     #[test]
     fn a_lattice_ripple_is_no_dent_a_spread_is() {
         // A kernel half the pitch leaves ripples in the density: one marker
-        // moved by 0.4 pitch drops a cell or two below 0.75 x rest. A press
+        // moved by 0.4 pitch drops a cell or two below 0.80 x rest. A press
         // that spreads the markers within 3 pitches makes a dent wider than
         // the pitch.
         use crate::density::{self, DensitySetup};

@@ -375,7 +375,7 @@ mod tests {
         // Why the relative rule is the default (SPEC section 3): with every
         // frame going through the density (no skip), the paper's absolute
         // T = 0.3 /mm^2 finds the density fall-off at the rim on a frame
-        // without contact; 0.75 x rest does not.
+        // without contact; 0.80 x rest does not.
         let cat = Category::NoContact;
         let mut params = Params::default();
         params.contact.skip_unmoved = false;
