@@ -351,7 +351,7 @@ fn detect_in(
         } else if strength >= GLINT_RETRY * need(guess)
             && det.area.as_ref().is_none_or(|a| a.contains(guess))
         {
-            // The brightest pixel of a pin with a glint on its edge (real
+            // The brightest pixel of a pin with a glint off its middle (real
             // TacTip pins) lies off the blob's middle, where the DoH is
             // weak: look once more at the blob's centroid.
             let Some((x, y)) = refine(frame, guess, det.radius_px, det.min_contrast)
@@ -2017,7 +2017,7 @@ mod tests {
     }
 
     #[test]
-    fn pins_with_a_glint_on_their_edge_are_found() {
+    fn pins_with_a_glint_off_their_middle_are_found() {
         // Raw TacTip pins: a white disc over dark skin, every third with a
         // small specular glint 3.5 px off its middle, brighter than the rest
         // of the pin: the pin's brightest pixel, where the DoH is weak.
