@@ -251,7 +251,8 @@ pub fn segment(
 
 /// A region whose radius (as a disc of its area) exceeds this many kernel
 /// widths h is centred on its centroid, each cell weighted by how far its
-/// score lies below the threshold; a narrower one on its lowest point (the
+/// score lies below the extent (`relative_extent`; the threshold itself
+/// under the absolute rule); a narrower one on its lowest point (the
 /// paper's method, refined by a quadratic fit). Measured (BENCHMARKS.md,
 /// session 11): on another renderer's frames, the centre error p95 fell
 /// from 19.6 to 4.4 px (nominal) and the large contacts' median from 23.1

@@ -351,9 +351,9 @@ fn detect_in(
         } else if strength >= GLINT_RETRY * need(guess)
             && det.area.as_ref().is_none_or(|a| a.contains(guess))
         {
-            // The brightest pixel of a pin with a glint off its middle (real
-            // TacTip pins) lies off the blob's middle, where the DoH is
-            // weak: look once more at the blob's centroid.
+            // A glint off a pin's middle (real TacTip pins) is its brightest
+            // pixel, where the DoH is weak: look once more at the blob's
+            // centroid.
             let Some((x, y)) = refine(frame, guess, det.radius_px, det.min_contrast)
                 .and_then(|(p, _, _)| to_img(p))
             else {

@@ -45,8 +45,8 @@ pub const ABSOLUTE_THRESHOLD_PER_MM2: f64 = 0.3;
 /// 13; 0.80 with [`RELATIVE_EXTENT`] measured (BENCHMARKS.md, "After session
 /// 13"): a flat punch 4-6 mm wide dents the density only in a ring that
 /// reaches 0.73-0.78, which 0.75 missed or cut into arcs (another renderer's
-/// large contacts: 18 of 22 found, p95 37 px; now 22 of 22, 4.7 px), and the
-/// real TacTip taps are found on 92 % of the frames instead of 84 %.
+/// large contacts: 18 of 22 found, p95 37 px; now 22 of 22, 5.4 px), and the
+/// real cr TacTip taps are found on 92 % of the frames instead of 84 %.
 pub const RELATIVE_THRESHOLD: f64 = 0.80;
 /// A contact region grows from its samples below [`RELATIVE_THRESHOLD`]
 /// through the connected samples below this fraction of the rest density
