@@ -798,9 +798,14 @@ fn follow_one(
             return None;
         }
         let step2 = (c.x - at.x).powi(2) + (c.y - at.y).powi(2);
+        // A centroid in the pixel the window is centred on would get the
+        // same window again, and so the same centroid: settled.
+        let same_window = |a: f64, b: f64| (a + 0.5) as i64 == (b + 0.5) as i64;
+        let settled = step2 < FOLLOW_SETTLED_PX * FOLLOW_SETTLED_PX
+            || (same_window(c.x, at.x) && same_window(c.y, at.y));
         at = c;
         hit = Some((c, contrast, area));
-        if step2 < FOLLOW_SETTLED_PX * FOLLOW_SETTLED_PX {
+        if settled {
             break;
         }
     }
