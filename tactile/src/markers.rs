@@ -932,7 +932,8 @@ pub fn centroid_radii(points: &[PointPx], radius_px: f64) -> Vec<f64> {
 /// Most refinement passes per followed marker.
 pub const FOLLOW_PASSES: usize = 3;
 /// A followed marker whose centroid moved less than this in a pass has
-/// settled, px.
+/// settled, px; so has one whose centroid stays in the pixel its window was
+/// centred on (the next window would be the same).
 const FOLLOW_SETTLED_PX: f64 = 0.25;
 /// Fraction of followed markers that may be lost (and left out) before
 /// [`follow`] gives up (and [`follow_or_search`] without a local search
