@@ -542,7 +542,8 @@ pub fn follow_or_search(
         Some(rest.contrast),
         reach_px,
         max_lost,
-    ) else {
+    )
+    .filter(|found| !noise_like(positive, det, found, rest.radii_px)) else {
         return (full(), Search::Full);
     };
     let lost = found.iter().filter(|f| f.is_none()).count();
@@ -563,6 +564,79 @@ pub fn follow_or_search(
         Some(list) => (Markers { list }, Search::Local),
         None => (full(), Search::Full),
     }
+}
+
+/// Most windows sampled from [`NOISE_SAMPLES`] of the followed markers
+/// `found` have an outline as bright as their top ([`NOISE_OUTLINE`]): the
+/// frame is no marker image (sensor noise, a texture), whatever centroids
+/// following found in it. A window around a marker has a dark outline
+/// unless a neighbour's top reaches into it: 1-4 % of the windows on the
+/// raw taps and the renderer's nominal frames, 14 % on its blurred ones, all
+/// of them on uniform noise, where every window's centroid sits near its
+/// middle and so near its rest place (BENCHMARKS.md, session 14).
+fn noise_like(
+    frame: &GreyFrame,
+    det: &Detector,
+    found: &[Option<Marker>],
+    radii_px: &[f64],
+) -> bool {
+    let step = found.len().div_ceil(NOISE_SAMPLES).max(1);
+    let (mut looked, mut noisy) = (0usize, 0usize);
+    for (k, m) in found.iter().enumerate().step_by(step) {
+        let Some(m) = m else { continue };
+        let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
+        if let Some(top) = outline_reaches_top(frame, m.pos, radius_px, det.min_contrast) {
+            looked += 1;
+            noisy += usize::from(top);
+        }
+    }
+    2 * noisy > looked && looked > 0
+}
+
+/// Followed markers [`noise_like`] looks at, at most.
+const NOISE_SAMPLES: usize = 32;
+/// [`noise_like`]: a window's outline reaches its top when its brightest
+/// pixel lies at least this fraction of the way from the outline's darkest
+/// to the brightest pixel of the 3x3 at the window's middle.
+const NOISE_OUTLINE: f32 = 0.9;
+
+/// Whether the centroid window of [`refine`] at `at` has an outline as
+/// bright as its top ([`NOISE_OUTLINE`]); `None` for a window off the frame
+/// or below the contrast floor.
+fn outline_reaches_top(
+    frame: &GreyFrame,
+    at: PointPx,
+    radius_px: f64,
+    min_contrast: f32,
+) -> Option<bool> {
+    let rw = radius_px.ceil() as i64 + 2;
+    let (cx, cy) = ((at.x + 0.5) as i64, (at.y + 0.5) as i64);
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    if cx - rw < 0 || cy - rw < 0 || cx + rw >= w || cy + rw >= h {
+        return None;
+    }
+    let (w, rw) = (w as usize, rw as usize);
+    let (cx, cy) = (cx as usize, cy as usize);
+    let data = frame.data();
+    let row = |y: usize| &data[y * w + cx - rw..=y * w + cx + rw];
+    let (mut lo, mut rim) = (u8::MAX, 0u8);
+    for v in row(cy - rw).iter().chain(row(cy + rw)) {
+        lo = lo.min(*v);
+        rim = rim.max(*v);
+    }
+    for y in cy - rw..=cy + rw {
+        for v in [data[y * w + cx - rw], data[y * w + cx + rw]] {
+            lo = lo.min(v);
+            rim = rim.max(v);
+        }
+    }
+    let hi = (cy - 1..=cy + 1)
+        .flat_map(|y| &data[y * w + cx - 1..=y * w + cx + 1])
+        .copied()
+        .max()
+        .unwrap_or(0);
+    let range = hi as f32 - lo as f32;
+    (range >= min_contrast.max(1.0)).then(|| rim as f32 >= lo as f32 + NOISE_OUTLINE * range)
 }
 
 /// The followed markers `found` (per rest marker of `rest.at`, `None`

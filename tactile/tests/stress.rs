@@ -126,6 +126,9 @@ fn blank_saturated_and_noise_frames_give_no_contact_and_finite_output() {
             r.contact,
             r.markers.len()
         );
+        // None is a marker image: noise too (following alone would put a
+        // centroid near every rest place in it).
+        assert!(r.blank, "not blank: {} markers", r.markers.len());
         for t in [
             r.times.detect_ms,
             r.times.kde_ms,
