@@ -636,7 +636,7 @@ fn outline_reaches_top(
         .max()
         .unwrap_or(0);
     let range = hi as f32 - lo as f32;
-    (range >= min_contrast.max(1.0)).then(|| rim as f32 >= lo as f32 + NOISE_OUTLINE * range)
+    (range >= min_contrast.max(1.0)).then_some(rim as f32 >= lo as f32 + NOISE_OUTLINE * range)
 }
 
 /// The followed markers `found` (per rest marker of `rest.at`, `None`
