@@ -567,12 +567,13 @@ pub fn follow_or_search(
 }
 
 /// Most windows sampled from [`NOISE_SAMPLES`] of the followed markers
-/// `found` have an outline as bright as their top ([`NOISE_OUTLINE`]): the
-/// frame is no marker image (sensor noise, a texture), whatever centroids
-/// following found in it. A window around a marker has a dark outline
-/// unless a neighbour's top reaches into it: 1-4 % of the windows on the
-/// raw taps and the renderer's nominal frames, 14 % on its blurred ones, all
-/// of them on uniform noise, where every window's centroid sits near its
+/// `found` have a rough outline ([`NOISE_ROUGHNESS`]): the frame is no
+/// marker image (sensor noise, a texture), whatever centroids following
+/// found in it. Around a marker the outline runs over the skin and across
+/// the edges of a few blobs: the mean step between its neighbouring pixels
+/// is 0.05-0.07 of the window's range on the raw taps and the renderer's
+/// nominal, blurred and dim frames, 0.125 on franka's binarised pins, and
+/// 0.37 on uniform noise, where every window's centroid sits near its
 /// middle and so near its rest place (BENCHMARKS.md, session 14).
 fn noise_like(
     frame: &GreyFrame,
@@ -585,9 +586,9 @@ fn noise_like(
     for (k, m) in found.iter().enumerate().step_by(step) {
         let Some(m) = m else { continue };
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
-        if let Some(top) = outline_reaches_top(frame, m.pos, radius_px, det.min_contrast) {
+        if let Some(rough) = outline_roughness(frame, m.pos, radius_px, det.min_contrast) {
             looked += 1;
-            noisy += usize::from(top);
+            noisy += usize::from(rough > NOISE_ROUGHNESS);
         }
     }
     2 * noisy > looked && looked > 0
@@ -595,48 +596,58 @@ fn noise_like(
 
 /// Followed markers [`noise_like`] looks at, at most.
 const NOISE_SAMPLES: usize = 32;
-/// [`noise_like`]: a window's outline reaches its top when its brightest
-/// pixel lies at least this fraction of the way from the outline's darkest
-/// to the brightest pixel of the 3x3 at the window's middle.
-const NOISE_OUTLINE: f32 = 0.9;
+/// [`noise_like`]: an outline is rough when the mean step between its
+/// neighbouring pixels exceeds this fraction of the window's range (twice
+/// franka's median, two thirds of uniform noise's).
+const NOISE_ROUGHNESS: f32 = 0.25;
 
-/// Whether the centroid window of [`refine`] at `at` has an outline as
-/// bright as its top ([`NOISE_OUTLINE`]); `None` for a window off the frame
-/// or below the contrast floor.
-fn outline_reaches_top(
+/// The mean absolute step between neighbouring pixels around the outline
+/// of [`refine`]'s window at `at`, over the window's range (the outline's
+/// darkest pixel to the brightest of the 3x3 at its middle); `None` for a
+/// window off the frame or below the contrast floor.
+fn outline_roughness(
     frame: &GreyFrame,
     at: PointPx,
     radius_px: f64,
     min_contrast: f32,
-) -> Option<bool> {
+) -> Option<f32> {
     let rw = radius_px.ceil() as i64 + 2;
     let (cx, cy) = ((at.x + 0.5) as i64, (at.y + 0.5) as i64);
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     if cx - rw < 0 || cy - rw < 0 || cx + rw >= w || cy + rw >= h {
         return None;
     }
-    let (w, rw) = (w as usize, rw as usize);
-    let (cx, cy) = (cx as usize, cy as usize);
+    let (w, rw, cx, cy) = (w as usize, rw as usize, cx as usize, cy as usize);
     let data = frame.data();
-    let row = |y: usize| &data[y * w + cx - rw..=y * w + cx + rw];
-    let (mut lo, mut rim) = (u8::MAX, 0u8);
-    for v in row(cy - rw).iter().chain(row(cy + rw)) {
-        lo = lo.min(*v);
-        rim = rim.max(*v);
+    let (x0, x1, y0, y1) = (cx - rw, cx + rw, cy - rw, cy + rw);
+    // The outline's four sides, each with both its corners: their steps
+    // together go once round it.
+    let row = |y: usize| &data[y * w + x0..=y * w + x1];
+    let col = |x: usize| (y0..=y1).map(move |y| data[y * w + x]);
+    let side = |px: &mut dyn Iterator<Item = u8>| {
+        let first = px.next().unwrap_or(0);
+        px.fold((first, first, 0u32), |(lo, prev, steps), v| {
+            (lo.min(v), v, steps + u32::from(v.abs_diff(prev)))
+        })
+    };
+    let (mut lo, mut steps) = (u8::MAX, 0u32);
+    for (l, _, s) in [
+        side(&mut row(y0).iter().copied()),
+        side(&mut row(y1).iter().copied()),
+        side(&mut col(x0)),
+        side(&mut col(x1)),
+    ] {
+        lo = lo.min(l);
+        steps += s;
     }
-    for y in cy - rw..=cy + rw {
-        for v in [data[y * w + cx - rw], data[y * w + cx + rw]] {
-            lo = lo.min(v);
-            rim = rim.max(v);
-        }
-    }
+    let n = 8 * rw as u32;
     let hi = (cy - 1..=cy + 1)
         .flat_map(|y| &data[y * w + cx - 1..=y * w + cx + 1])
         .copied()
         .max()
         .unwrap_or(0);
     let range = hi as f32 - lo as f32;
-    (range >= min_contrast.max(1.0)).then_some(rim as f32 >= lo as f32 + NOISE_OUTLINE * range)
+    (range >= min_contrast.max(1.0)).then(|| steps as f32 / n as f32 / range)
 }
 
 /// The followed markers `found` (per rest marker of `rest.at`, `None`
@@ -2234,6 +2245,45 @@ mod tests {
                 "{det:?}: {} of {}",
                 matched.len(),
                 rest.markers.len()
+            );
+        }
+    }
+
+    #[test]
+    fn outlines_around_markers_are_smooth_and_around_noise_rough() {
+        for cat in [Category::Nominal, Category::Degraded, Category::Saturated] {
+            let sensor = cat.sensor(640, 480, 3);
+            let rest = rest_frame(&sensor, 4);
+            let cal = crate::calibrate::calibrate(
+                std::slice::from_ref(&rest.image),
+                &crate::params::Params::default(),
+            )
+            .unwrap();
+            let found: Vec<Option<Marker>> = follow_all(
+                &rest.image,
+                &cal.detector,
+                &cal.rest_markers,
+                &cal.centroid_radii_px,
+                1.0,
+            );
+            assert!(
+                !noise_like(&rest.image, &cal.detector, &found, &cal.centroid_radii_px),
+                "{cat:?}"
+            );
+            // The same windows on uniform noise.
+            let mut state = 7u64;
+            let noise: Vec<u8> = (0..640 * 480)
+                .map(|_| {
+                    state = state
+                        .wrapping_mul(6364136223846793005)
+                        .wrapping_add(1442695040888963407);
+                    (state >> 56) as u8
+                })
+                .collect();
+            let noise = GreyFrame::new(640, 480, noise).unwrap();
+            assert!(
+                noise_like(&noise, &cal.detector, &found, &cal.centroid_radii_px),
+                "{cat:?}"
             );
         }
     }
