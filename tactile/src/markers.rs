@@ -28,7 +28,8 @@
 //! [`follow_or_search`] follows each rest marker in a small window,
 //! searches for the ones it loses (moved too far, hidden or merged by a
 //! contact) in boxes around their rest places, and searches the whole
-//! frame when a contact lost a quarter of them. On a dome
+//! frame when a contact lost a quarter of them, or when the followed
+//! windows look like noise (`noise_like`). On a dome
 //! ([`crate::surface`]) the strength threshold is eased by the
 //! foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
@@ -503,7 +504,9 @@ pub struct Reference<'a> {
 /// are searched for around their rest places, and so are the rest's gaps
 /// (`search_around`, boxes reaching one `local_pitch_px` beyond them);
 /// without it, up to [`FOLLOW_MAX_LOST`] lost markers are left out.
-/// Otherwise the whole frame is searched ([`detect`]).
+/// Otherwise, and when most of the followed windows have a rough outline
+/// (uniform noise, where every window's centroid sits near its rest place:
+/// `noise_like`), the whole frame is searched ([`detect`]).
 ///
 /// A followed marker keeps its followed centroid; a searched one is added
 /// where no followed marker lies within `reach_px` (it is the new place of
