@@ -571,8 +571,9 @@ pub fn follow_or_search(
 
 /// Most windows sampled from [`NOISE_SAMPLES`] of the followed markers
 /// `found` have a rough outline ([`NOISE_ROUGHNESS`]): the frame is no
-/// marker image (sensor noise), whatever centroids following found in it. Around a marker the outline runs over the skin and across
-/// the edges of a few blobs: the mean step between its neighbouring pixels
+/// marker image (sensor noise), whatever centroids following found in it.
+/// Around a marker the outline runs over the skin and across the edges of
+/// a few blobs: the mean step between its neighbouring pixels
 /// is 0.054-0.07 of the window's range on the raw taps and the renderer's
 /// nominal, blurred and dim frames, 0.125 on franka's binarised pins, and
 /// 0.37 on uniform noise, where every window's centroid sits near its
@@ -613,8 +614,8 @@ fn outline_roughness(
     radius_px: f64,
     min_contrast: f32,
 ) -> Option<f32> {
-    let rw = radius_px.ceil() as i64 + 2;
-    let (cx, cy) = ((at.x + 0.5) as i64, (at.y + 0.5) as i64);
+    let rw = window_reach_px(radius_px);
+    let (cx, cy) = window_centre(at);
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     if cx - rw < 0 || cy - rw < 0 || cx + rw >= w || cy + rw >= h {
         return None;
@@ -622,23 +623,20 @@ fn outline_roughness(
     let (w, rw, cx, cy) = (w as usize, rw as usize, cx as usize, cy as usize);
     let data = frame.data();
     let (x0, x1, y0, y1) = (cx - rw, cx + rw, cy - rw, cy + rw);
+    // Darkest pixel and summed steps along one side.
+    fn side(mut px: impl Iterator<Item = u8>) -> (u8, u32) {
+        let first = px.next().unwrap_or(0);
+        let (lo, _, steps) = px.fold((first, first, 0u32), |(lo, prev, steps), v| {
+            (lo.min(v), v, steps + u32::from(v.abs_diff(prev)))
+        });
+        (lo, steps)
+    }
+    let row = |y: usize| data[y * w + x0..=y * w + x1].iter().copied();
+    let col = |x: usize| (y0..=y1).map(move |y| data[y * w + x]);
+    let (mut lo, mut steps) = (u8::MAX, 0u32);
     // The outline's four sides, each with both its corners: their steps
     // together go once round it.
-    let row = |y: usize| &data[y * w + x0..=y * w + x1];
-    let col = |x: usize| (y0..=y1).map(move |y| data[y * w + x]);
-    let side = |px: &mut dyn Iterator<Item = u8>| {
-        let first = px.next().unwrap_or(0);
-        px.fold((first, first, 0u32), |(lo, prev, steps), v| {
-            (lo.min(v), v, steps + u32::from(v.abs_diff(prev)))
-        })
-    };
-    let (mut lo, mut steps) = (u8::MAX, 0u32);
-    for (l, _, s) in [
-        side(&mut row(y0).iter().copied()),
-        side(&mut row(y1).iter().copied()),
-        side(&mut col(x0)),
-        side(&mut col(x1)),
-    ] {
+    for (l, s) in [side(row(y0)), side(row(y1)), side(col(x0)), side(col(x1))] {
         lo = lo.min(l);
         steps += s;
     }
@@ -773,14 +771,7 @@ fn search_around(
     let followed_at: Vec<PointPx> = in_reach.iter().map(|&j| list[j].pos).collect();
     let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
     let mut searched: Vec<Marker> = Vec::new();
-    let span = boxes.iter().fold([wx1, wy1, wx0, wy0], |a, b| {
-        [
-            a[0].min(b[0]),
-            a[1].min(b[1]),
-            a[2].max(b[2]),
-            a[3].max(b[3]),
-        ]
-    });
+    let span = boxes.iter().fold([wx1, wy1, wx0, wy0], |a, b| union(&a, b));
     let mut taken = Occupancy::new(span);
     for b in boxes {
         for m in detect_in(frame, det, b, Some(typical_range)) {
@@ -887,9 +878,8 @@ fn follow_one(
         let step2 = (c.x - at.x).powi(2) + (c.y - at.y).powi(2);
         // A centroid in the pixel the window is centred on would get the
         // same window again, and so the same centroid: settled.
-        let same_window = |a: f64, b: f64| (a + 0.5) as i64 == (b + 0.5) as i64;
-        let settled = step2 < FOLLOW_SETTLED_PX * FOLLOW_SETTLED_PX
-            || (same_window(c.x, at.x) && same_window(c.y, at.y));
+        let settled =
+            step2 < FOLLOW_SETTLED_PX * FOLLOW_SETTLED_PX || window_centre(c) == window_centre(at);
         at = c;
         hit = Some((c, contrast, area));
         if settled {
@@ -995,7 +985,7 @@ fn follow_each(
 /// would otherwise pull the centroid, by an amount that changes with the
 /// frame's blur and light.
 pub fn centroid_radii(points: &[PointPx], radius_px: f64) -> Vec<f64> {
-    let reach = radius_px.ceil() + 2.0;
+    let reach = window_reach_px(radius_px) as f64;
     let (mut w, mut h) = (1.0f64, 1.0f64);
     for p in points.iter().filter(|p| p.is_finite()) {
         w = w.max(p.x + 1.0);
@@ -1658,6 +1648,18 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
     (values, cols)
 }
 
+/// How far [`refine`]'s window reaches either side of its centre for a
+/// marker of `radius_px`, px.
+fn window_reach_px(radius_px: f64) -> i64 {
+    radius_px.ceil() as i64 + 2
+}
+
+/// The pixel [`refine`]'s window around `p` is centred on. Guesses are
+/// >= 0: adding 0.5 and truncating rounds (no libm call).
+fn window_centre(p: PointPx) -> (i64, i64) {
+    ((p.x + 0.5) as i64, (p.y + 0.5) as i64)
+}
+
 /// Half-maximum intensity centroid in a window around `guess` (large
 /// enough for the marker when the guess is within 1.5 px): the background is
 /// the darkest pixel of the window's outline, the peak the brightest of the
@@ -1671,9 +1673,8 @@ fn refine(
     radius_px: f64,
     min_contrast: f32,
 ) -> Option<(PointPx, f32, f32)> {
-    let rw = radius_px.ceil() as i64 + 2;
-    // Guesses are >= 0: adding 0.5 and truncating rounds (no libm call).
-    let (cx, cy) = ((guess.x + 0.5) as i64, (guess.y + 0.5) as i64);
+    let rw = window_reach_px(radius_px);
+    let (cx, cy) = window_centre(guess);
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let (x0, x1) = ((cx - rw).max(0), (cx + rw).min(w - 1));
     let (y0, y1) = ((cy - rw).max(0), (cy + rw).min(h - 1));
