@@ -68,14 +68,13 @@ fn stages(c: &mut Criterion) {
         b.iter(|| {
             contact::segment(
                 black_box(&map),
-                &cal.rest_density,
-                &cal.mask,
+                &cal.density_reference(),
                 &params.contact,
                 0.1,
             )
         })
     });
-    let region = contact::segment(&map, &cal.rest_density, &cal.mask, &params.contact, 0.1);
+    let region = contact::segment(&map, &cal.density_reference(), &params.contact, 0.1);
     c.bench_function("contact_locate_tracking", |b| {
         b.iter(|| {
             contact::locate(

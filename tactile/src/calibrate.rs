@@ -10,6 +10,7 @@
 //! are only searched inside it.
 
 use crate::area::{self, AreaError, SensingArea, WorkToInput};
+use crate::contact;
 use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Detector, MarkerError, RimBand};
@@ -66,6 +67,9 @@ pub struct Calibration {
     pub rest_density: DensityMap,
     /// Sensing-area mask on the same grid (row-major).
     pub mask: Vec<bool>,
+    /// Median of the rest density over the mask, markers per mm^2
+    /// ([`contact::rim_trust`]).
+    pub rest_median_per_mm2: f32,
     /// The skin's shape (working px): the tracked contact centre is found
     /// in its chart.
     pub surface: Surface,
@@ -86,6 +90,17 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// What every frame's density is compared with
+    /// ([`contact::segment`]).
+    pub fn density_reference(&self) -> contact::DensityReference<'_> {
+        contact::DensityReference {
+            rest: &self.rest_density,
+            mask: &self.mask,
+            surface: &self.surface,
+            rest_median_per_mm2: self.rest_median_per_mm2,
+        }
+    }
+
     /// A warning when the rest's marker lattice has holes: more gap points
     /// ([`rest_gaps`]) than [`HOLEY_REST_SHARE`] of its markers. A rest that
     /// was pressed, or the pixel-wise median of taps, loses the pins that
@@ -187,7 +202,8 @@ pub fn calibrate_mapped(
         });
     }
     (cal.rest_markers, cal.centroid_radii_px) = settled.into_iter().unzip();
-    (cal.rest_density, cal.mask) = reference(&cal.rest_markers, &cal.density, &cal.detector);
+    (cal.rest_density, cal.mask, cal.rest_median_per_mm2) =
+        reference(&cal.rest_markers, &cal.density, &cal.detector);
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
     Ok(cal)
@@ -508,7 +524,7 @@ fn finish(
         step_px: params.density.grid_step_px as usize,
         truncate_sigmas: params.density.truncate_sigmas,
     };
-    let (rest_density, mask) = reference(&rest_markers, &density, &detector);
+    let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
     Ok(Calibration {
         width: w,
@@ -519,6 +535,7 @@ fn finish(
         density,
         rest_density,
         mask,
+        rest_median_per_mm2,
         surface,
         centroid_radii_px,
         rest_contrast: Vec::new(),
@@ -653,14 +670,15 @@ pub fn rest_gaps(
     gaps
 }
 
-/// What the rest markers give every frame's density: the rest density and
-/// the sensing mask on its grid (where the rest density is, inside the
-/// detector's area).
+/// What the rest markers give every frame's density: the rest density, the
+/// sensing mask on its grid (where the rest density is, inside the
+/// detector's area) and the rest density's median over the mask (0 for an
+/// empty mask).
 fn reference(
     rest_markers: &[PointPx],
     density: &DensitySetup,
     detector: &Detector,
-) -> (DensityMap, Vec<bool>) {
+) -> (DensityMap, Vec<bool>, f32) {
     let rest_density = density::estimate(rest_markers, density, None);
     let mut mask = sensing_mask(&rest_density);
     let grid = density.grid();
@@ -670,7 +688,20 @@ fn reference(
             *m &= area.contains(p);
         }
     }
-    (rest_density, mask)
+    let mut inside: Vec<f32> = rest_density
+        .values_per_mm2
+        .iter()
+        .zip(&mask)
+        .filter(|&(v, &m)| m && v.is_finite())
+        .map(|(&v, _)| v)
+        .collect();
+    let median = if inside.is_empty() {
+        0.0
+    } else {
+        let k = inside.len() / 2;
+        *inside.select_nth_unstable_by(k, f32::total_cmp).1
+    };
+    (rest_density, mask, median)
 }
 
 /// The bounding box of the rest markers grown by a pitch, the marker size and

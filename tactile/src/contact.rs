@@ -20,7 +20,7 @@
 //! the tracked markers alone.
 //!
 //! ```
-//! use dexitac_tactile::contact::{segment, Region};
+//! use dexitac_tactile::contact::{segment, DensityReference, Region};
 //! use dexitac_tactile::density::{DensityMap, Grid};
 //! use dexitac_tactile::params::{ContactParams, ThresholdMode};
 //! // A 5x5 density map (step 1) with a dent at (3, 2); rest density 1.
@@ -31,14 +31,14 @@
 //! let map = DensityMap { grid, roi: grid.full(), values_per_mm2: v };
 //! let rest = DensityMap { grid, roi: grid.full(), values_per_mm2: vec![1.0; 25] };
 //! let params = ContactParams { min_area_mm2: 0.0, ..ContactParams::default() };
-//! let r: Region = segment(&map, &rest, &[true; 25], &params, 1.0).unwrap();
+//! let r: Region = segment(&map, &DensityReference::flat(&rest, &[true; 25]), &params, 1.0).unwrap();
 //! assert_eq!(r.cells, 2);
 //! assert!((r.centre.x - 3.0).abs() < 0.5 && (r.centre.y - 2.0).abs() < 0.5);
 //! ```
 
 use crate::density::DensityMap;
 use crate::params::{CentreMethod, ContactParams, ThresholdMode};
-use crate::surface::Surface;
+use crate::surface::{Surface, SurfaceMean};
 use crate::tracking::{self, Field};
 use crate::PointPx;
 
@@ -47,7 +47,7 @@ use crate::PointPx;
 pub struct Region {
     /// The region's centre, working px: the sub-pixel argmin of the score
     /// over it, or for a region wider than [`CENTROID_RADIUS_H`] kernel
-    /// widths its depth-weighted centroid.
+    /// widths its depth-weighted centroid on the skin.
     pub centre: PointPx,
     /// Grid cells in the region.
     pub cells: usize,
@@ -56,6 +56,59 @@ pub struct Region {
     /// Lowest score (density / rest, or density per mm^2).
     pub depth: f32,
 }
+
+/// What a frame's density map is compared with, all from the calibration.
+#[derive(Debug, Clone, Copy)]
+pub struct DensityReference<'a> {
+    /// The rest density, on the frame map's grid.
+    pub rest: &'a DensityMap,
+    /// The sensing mask on the same grid (row-major).
+    pub mask: &'a [bool],
+    /// The skin's shape: a wide region's centroid is taken on it
+    /// ([`SurfaceMean`]).
+    pub surface: &'a Surface,
+    /// Median rest density over the mask, markers per mm^2: a wide region's
+    /// cells count less where the rest density falls below it
+    /// ([`rim_trust`]). 0 turns that off.
+    pub rest_median_per_mm2: f32,
+}
+
+impl<'a> DensityReference<'a> {
+    /// A flat skin with no rim weighting: the rest density and mask alone.
+    pub fn flat(rest: &'a DensityMap, mask: &'a [bool]) -> Self {
+        Self {
+            rest,
+            mask,
+            surface: &Surface::Flat,
+            rest_median_per_mm2: 0.0,
+        }
+    }
+}
+
+/// Weight of a cell in a wide region's centroid by its rest density `rest`
+/// against the median `median`: 1 at or above the median, falling linearly
+/// to 0 at half of it. Where the marker lattice ends (the rim, the fall-off
+/// of the kernel beyond the last ring) the rest density drops steeply, and
+/// its ratio to the frame's density swings with small shifts of the outer
+/// markers, which a press near the rim crowds and merges. Measured on the
+/// other renderer's rim contacts (BENCHMARKS.md, session 15): without it the
+/// centroid on the dome ran outwards, 3.63 px median against 2.94 with it.
+pub fn rim_trust(rest: f32, median: f32) -> f64 {
+    if !(median > 0.0 && median.is_finite()) {
+        return 1.0;
+    }
+    let f = (rest / median) as f64;
+    if f.is_nan() {
+        return 0.0;
+    }
+    ((f - RIM_TRUST_FLOOR) / (1.0 - RIM_TRUST_FLOOR)).clamp(0.0, 1.0)
+}
+
+/// Rest density (fraction of the median) at and below which a cell has no
+/// weight in a wide region's centroid ([`rim_trust`]). Measured at 0.3, 0.5
+/// and 0.65: rim contacts 3.22 / 2.94 / 2.50 px median, large ones 1.51 /
+/// 1.75 / 1.95 (the cut eats into a wide contact's outer side).
+pub const RIM_TRUST_FLOOR: f64 = 0.5;
 
 /// Where a contact's centre came from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -92,26 +145,28 @@ pub struct Contact {
 }
 
 /// One connected region of [`segment`]'s flood fill: its cells below the
-/// threshold, its lowest cell and score, and its moments `(sum w, sum w i,
-/// sum w j)` over all its cells, each weighted by how far its score lies
-/// below the extent threshold.
+/// threshold, its lowest cell and score (its cells are kept beside it).
 struct Flood {
     cells: usize,
     low: (usize, usize),
     depth: f32,
-    mass: [f64; 3],
 }
 
 /// Stage 4 entry: the largest low-density region of `map` (inside its ROI and
 /// the mask), or `None` when there is none of at least `min_area_mm2`.
-/// `rest` and `mask` are on the same grid as `map`.
+/// The reference's rest density and mask are on the same grid as `map`.
 pub fn segment(
     map: &DensityMap,
-    rest: &DensityMap,
-    mask: &[bool],
+    reference: &DensityReference,
     params: &ContactParams,
     mm_per_px: f64,
 ) -> Option<Region> {
+    let DensityReference {
+        rest,
+        mask,
+        surface,
+        rest_median_per_mm2,
+    } = *reference;
     let g = map.grid;
     let roi = map.roi;
     let n = g.nx * g.ny;
@@ -143,6 +198,8 @@ pub fn segment(
     let mut seen = vec![false; n];
     let mut stack = Vec::new();
     let mut best: Option<Flood> = None;
+    // The cells of the flood under way and of the best one so far.
+    let (mut flood_cells, mut best_cells) = (Vec::new(), Vec::new());
     for j in roi.j0..roi.j1 {
         for i in roi.i0..roi.i1 {
             let k = j * g.nx + i;
@@ -153,16 +210,13 @@ pub fn segment(
             stack.push((i, j));
             let mut count = 0;
             let mut low = ((i, j), score(i, j));
-            let mut mass = [0f64; 3];
+            flood_cells.clear();
             while let Some((ci, cj)) = stack.pop() {
                 let s = score(ci, cj);
                 if s < limit {
                     count += 1;
                 }
-                let w = (extent - s) as f64;
-                mass[0] += w;
-                mass[1] += w * ci as f64;
-                mass[2] += w * cj as f64;
+                flood_cells.push((ci, cj));
                 if s < low.1 {
                     low = ((ci, cj), s);
                 }
@@ -187,8 +241,8 @@ pub fn segment(
                     cells: count,
                     low: low.0,
                     depth: low.1,
-                    mass,
                 });
+                std::mem::swap(&mut flood_cells, &mut best_cells);
             }
         }
     }
@@ -196,7 +250,6 @@ pub fn segment(
         cells,
         low: (i, j),
         depth,
-        mass,
     } = best?;
     let step = g.step_px as f64;
     let area_mm2 = cells as f64 * step * step * mm_per_px * mm_per_px;
@@ -206,8 +259,18 @@ pub fn segment(
     let radius_cells = (cells as f64 / std::f64::consts::PI).sqrt();
     // A dent much wider than the kernel has a flat, noisy bottom: its
     // depth-weighted centroid, not its lowest point.
-    let centre = if radius_cells > CENTROID_RADIUS_H * params_reach_cells(map) && mass[0] > 0.0 {
-        g.point(mass[1] / mass[0], mass[2] / mass[0])
+    let centroid = || -> Option<PointPx> {
+        let mut mean = SurfaceMean::new(*surface);
+        for &(ci, cj) in &best_cells {
+            let rest_k = rest.values_per_mm2[cj * g.nx + ci];
+            let w = (extent - score(ci, cj)) as f64 * rim_trust(rest_k, rest_median_per_mm2);
+            mean.add(g.point(ci as f64, cj as f64), w);
+        }
+        mean.mean()
+    };
+    let wide = radius_cells > CENTROID_RADIUS_H * params_reach_cells(map);
+    let centre = if let Some(c) = wide.then(centroid).flatten() {
+        c
     } else {
         let offset = |a: Option<(usize, usize)>, b: Option<(usize, usize)>| -> f64 {
             match (
@@ -252,7 +315,8 @@ pub fn segment(
 /// A region whose radius (as a disc of its area) exceeds this many kernel
 /// widths h is centred on its centroid, each cell weighted by how far its
 /// score lies below the extent (`relative_extent`; the threshold itself
-/// under the absolute rule); a narrower one on its lowest point (the
+/// under the absolute rule) and by its [`rim_trust`], the mean taken on the
+/// skin ([`SurfaceMean`]); a narrower one on its lowest point (the
 /// paper's method, refined by a quadratic fit). Measured (BENCHMARKS.md,
 /// session 11): on another renderer's frames, the centre error p95 fell
 /// from 19.6 to 4.4 px (nominal) and the large contacts' median from 23.1
@@ -409,6 +473,7 @@ pub fn locate(
         }
         (CentreMethod::Hybrid, None) => {
             small_contact(rest, field, surface, pitch_px, params, mm_per_px)
+                .or_else(|| shallow_contact(rest, field, surface, pitch_px, params, mm_per_px))
         }
     }
 }
@@ -478,18 +543,7 @@ fn small_contact(
     params: &ContactParams,
     mm_per_px: f64,
 ) -> Option<Contact> {
-    let magnitude = |n: usize| -> Option<f64> {
-        let u = (*field.displacement.get(n)?)?;
-        Some(u.x.hypot(u.y))
-    };
-    let seed = field
-        .moved
-        .iter()
-        .filter_map(|&n| Some((n, magnitude(n)?)))
-        .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    if seed.1.is_nan() || seed.1 <= strong_move_px(field, pitch_px) {
-        return None;
-    }
+    let seed = strongest_move(field, pitch_px)?;
     let support_px = if field.jitter_px > 0.0 {
         (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
     } else {
@@ -500,13 +554,15 @@ fn small_contact(
     let near: Vec<usize> = rest
         .iter()
         .enumerate()
-        .filter(|&(n, &p)| dist(p, centre) <= reach && magnitude(n).is_some_and(|m| m > support_px))
+        .filter(|&(n, &p)| {
+            dist(p, centre) <= reach && magnitude(field, n).is_some_and(|m| m > support_px)
+        })
         .map(|(n, _)| n)
         .collect();
     let fit = tracking::radial_centre_on(surface, rest, field, &near, support_px, field.jitter_px)?;
     let mut d: Vec<f64> = near
         .iter()
-        .filter(|&&n| magnitude(n).is_some_and(|m| m > field.moved_px))
+        .filter(|&&n| magnitude(field, n).is_some_and(|m| m > field.moved_px))
         .map(|&n| dist(rest[n], fit.centre))
         .collect();
     let ok = fit.n_inliers >= params.min_moved_markers
@@ -522,6 +578,106 @@ fn small_contact(
     let k = d.len() / 2;
     let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
     Some(Contact {
+        centre: fit.centre,
+        area_mm2: std::f64::consts::PI * (r_px * mm_per_px).powi(2),
+        source: Source::Tracking,
+    })
+}
+
+/// The displacement of rest marker `n`, px (`None` when lost).
+fn magnitude(field: &Field, n: usize) -> Option<f64> {
+    let u = (*field.displacement.get(n)?)?;
+    Some(u.x.hypot(u.y))
+}
+
+/// The most displaced moved marker and its displacement, when that is a
+/// strong move ([`strong_move_px`]).
+fn strongest_move(field: &Field, pitch_px: f64) -> Option<(usize, f64)> {
+    let seed = field
+        .moved
+        .iter()
+        .filter_map(|&n| Some((n, magnitude(field, n)?)))
+        .max_by(|a, b| a.1.total_cmp(&b.1))?;
+    (seed.1 > strong_move_px(field, pitch_px)).then_some(seed)
+}
+
+/// A shallow contact's moved markers are gathered within this many pitches
+/// of its centre ([`shallow_contact`]).
+pub const SHALLOW_REACH_PITCHES: f64 = 5.0;
+/// A shallow contact's displacement lines may miss its centre by this much
+/// RMS, as an angle seen from the centre: the share of the median distance
+/// of its markers (at least [`MAX_FIT_RESIDUAL_PX`]).
+pub const SHALLOW_MAX_SPREAD_RAD: f64 = 0.05;
+/// A shallow contact's markers surround its centre: the mean of the unit
+/// vectors from the centre to them is at most this long (1: all on one
+/// side, 0: evenly all round).
+pub const SHALLOW_MAX_RESULTANT: f64 = 0.5;
+
+/// A contact too shallow to dent the density and too wide for
+/// [`small_contact`]: a ring of outward-moved markers around a centre that
+/// moved little. A flat punch pressed a little does this: the skin under it
+/// moves as one and only the pins at its edge tilt (measured on the other
+/// renderer: a 3.3 mm wide punch 0.75 mm deep left the density at 0.81 of
+/// rest at least, above the 0.80 threshold, and moved its ring's markers
+/// by up to 2.6 px). The moved markers within [`SHALLOW_REACH_PITCHES`] of
+/// the most displaced one give a first centre; the moved markers around that
+/// centre give the next, three fits in all. Accepted when at least twice
+/// `min_moved_markers` lines meet there ([`MIN_INLIER_SHARE`] of the
+/// weight, within [`SHALLOW_MAX_SPREAD_RAD`]) from all sides
+/// ([`SHALLOW_MAX_RESULTANT`]): a shear or a drift moves markers in
+/// parallel, and lines that only meet from one side place the centre
+/// poorly along them.
+fn shallow_contact(
+    rest: &[PointPx],
+    field: &Field,
+    surface: &Surface,
+    pitch_px: f64,
+    params: &ContactParams,
+    mm_per_px: f64,
+) -> Option<Contact> {
+    let (seed, _) = strongest_move(field, pitch_px)?;
+    let reach = SHALLOW_REACH_PITCHES * pitch_px;
+    let mut centre = rest[seed];
+    let mut near = Vec::new();
+    let mut fit = None;
+    for _ in 0..3 {
+        near = near_markers(rest, field, centre, reach);
+        let f = tracking::radial_centre_on(
+            surface,
+            rest,
+            field,
+            &near,
+            field.moved_px,
+            field.jitter_px,
+        )?;
+        centre = f.centre;
+        fit = Some(f);
+    }
+    let fit = fit?;
+    let c = surface.to_chart(fit.centre);
+    let (mut sx, mut sy) = (0.0, 0.0);
+    let mut d: Vec<f64> = Vec::with_capacity(near.len());
+    for &n in &near {
+        let q = surface.to_chart(rest[n]);
+        let l = dist(q, c);
+        if l > 0.0 && l.is_finite() {
+            sx += (q.x - c.x) / l;
+            sy += (q.y - c.y) / l;
+            d.push(dist(rest[n], fit.centre));
+        }
+    }
+    if d.is_empty() {
+        return None;
+    }
+    let resultant = sx.hypot(sy) / d.len() as f64;
+    let k = d.len() / 2;
+    let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
+    let ok = fit.n_inliers >= 2 * params.min_moved_markers
+        && fit.inlier_share >= MIN_INLIER_SHARE
+        && fit.residual_px <= MAX_FIT_RESIDUAL_PX.max(SHALLOW_MAX_SPREAD_RAD * r_px)
+        && resultant <= SHALLOW_MAX_RESULTANT
+        && dist(fit.centre, rest[seed]) <= reach;
+    ok.then(|| Contact {
         centre: fit.centre,
         area_mm2: std::f64::consts::PI * (r_px * mm_per_px).powi(2),
         source: Source::Tracking,
@@ -579,7 +735,13 @@ mod tests {
         }
         v[66] = 0.3;
         let (map, rest) = maps(v, 10, 10);
-        let r = segment(&map, &rest, &[true; 100], &loose(), 1.0).unwrap();
+        let r = segment(
+            &map,
+            &DensityReference::flat(&rest, &[true; 100]),
+            &loose(),
+            1.0,
+        )
+        .unwrap();
         assert_eq!(r.cells, 5);
         assert!((r.centre.x - 6.0).abs() < 0.5 && (r.centre.y - 6.0).abs() < 0.5);
     }
@@ -606,7 +768,13 @@ mod tests {
                 }
             }
             let (map, rest) = maps(v, 80, 80);
-            let r = segment(&map, &rest, &[true; 6400], &loose(), 1.0).unwrap();
+            let r = segment(
+                &map,
+                &DensityReference::flat(&rest, &[true; 6400]),
+                &loose(),
+                1.0,
+            )
+            .unwrap();
             assert!(
                 (r.centre.x - want_x).abs() < 0.5 && (r.centre.y - 40.0).abs() < 0.5,
                 "radius {radius}: {:?}",
@@ -650,12 +818,24 @@ mod tests {
             ..map.clone()
         };
         let want = grid.point(cx, cy);
-        let ring = segment(&map, &rest, &[true; 1600], &loose(), 1.0).unwrap();
+        let ring = segment(
+            &map,
+            &DensityReference::flat(&rest, &[true; 1600]),
+            &loose(),
+            1.0,
+        )
+        .unwrap();
         let off = (ring.centre.x - want.x).hypot(ring.centre.y - want.y);
         assert!(off < 2.0, "{:?} vs {want:?}", ring.centre);
         let mut no_extent = loose();
         no_extent.relative_extent = no_extent.relative_threshold;
-        let arc = segment(&map, &rest, &[true; 1600], &no_extent, 1.0).unwrap();
+        let arc = segment(
+            &map,
+            &DensityReference::flat(&rest, &[true; 1600]),
+            &no_extent,
+            1.0,
+        )
+        .unwrap();
         let off = (arc.centre.x - want.x).hypot(arc.centre.y - want.y);
         assert!(
             off > 30.0 && arc.cells < ring.cells / 4,
@@ -670,10 +850,10 @@ mod tests {
         let (map, rest) = maps(v, 10, 10);
         let mut p = loose();
         p.min_area_mm2 = 2.0;
-        assert!(segment(&map, &rest, &[true; 100], &p, 1.0).is_none());
+        assert!(segment(&map, &DensityReference::flat(&rest, &[true; 100]), &p, 1.0).is_none());
         let mut mask = [true; 100];
         mask[44] = false;
-        assert!(segment(&map, &rest, &mask, &loose(), 1.0).is_none());
+        assert!(segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).is_none());
     }
 
     #[test]
@@ -704,7 +884,13 @@ mod tests {
         let mut one = rest.clone();
         one[nearest].x += 0.4 * pitch;
         let map = density::estimate(&one, &setup, None);
-        let ripple = segment(&map, &rest_map, &mask, &loose(), 0.1).unwrap();
+        let ripple = segment(
+            &map,
+            &DensityReference::flat(&rest_map, &mask),
+            &loose(),
+            0.1,
+        )
+        .unwrap();
         assert!(!is_dent(&ripple, 8, 15.0, pitch), "{ripple:?}");
         let spread: Vec<PointPx> = rest
             .iter()
@@ -719,7 +905,13 @@ mod tests {
             })
             .collect();
         let map = density::estimate(&spread, &setup, None);
-        let dent = segment(&map, &rest_map, &mask, &loose(), 0.1).unwrap();
+        let dent = segment(
+            &map,
+            &DensityReference::flat(&rest_map, &mask),
+            &loose(),
+            0.1,
+        )
+        .unwrap();
         assert!(is_dent(&dent, 8, 15.0, pitch), "{dent:?}");
         assert!(dist(dent.centre, c) < 0.5 * pitch, "{dent:?}");
     }
@@ -729,11 +921,13 @@ mod tests {
         let (map, mut rest) = maps(vec![0.5f32; 16], 4, 4);
         rest.values_per_mm2 = vec![0.55; 16];
         let mut p = loose();
-        assert!(segment(&map, &rest, &[true; 16], &p, 1.0).is_none());
+        assert!(segment(&map, &DensityReference::flat(&rest, &[true; 16]), &p, 1.0).is_none());
         p.threshold = ThresholdMode::Absolute;
         p.absolute_threshold_per_mm2 = 0.6;
         assert_eq!(
-            segment(&map, &rest, &[true; 16], &p, 1.0).unwrap().cells,
+            segment(&map, &DensityReference::flat(&rest, &[true; 16]), &p, 1.0)
+                .unwrap()
+                .cells,
             16
         );
     }
@@ -741,8 +935,20 @@ mod tests {
     #[test]
     fn nan_and_mismatched_inputs_give_no_region() {
         let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
-        assert!(segment(&map, &rest, &[true; 16], &loose(), 1.0).is_none());
-        assert!(segment(&map, &rest, &[true; 3], &loose(), 1.0).is_none());
+        assert!(segment(
+            &map,
+            &DensityReference::flat(&rest, &[true; 16]),
+            &loose(),
+            1.0
+        )
+        .is_none());
+        assert!(segment(
+            &map,
+            &DensityReference::flat(&rest, &[true; 3]),
+            &loose(),
+            1.0
+        )
+        .is_none());
     }
 
     #[test]
@@ -780,6 +986,140 @@ mod tests {
             0.1
         )
         .is_none());
+    }
+
+    #[test]
+    fn rim_trust_ramps_from_half_the_median_to_the_median() {
+        assert_eq!(rim_trust(2.0, 1.0), 1.0);
+        assert_eq!(rim_trust(1.0, 1.0), 1.0);
+        assert!((rim_trust(0.75, 1.0) - 0.5).abs() < 1e-12);
+        assert_eq!(rim_trust(0.5, 1.0), 0.0);
+        assert_eq!(rim_trust(0.1, 1.0), 0.0);
+        assert_eq!(rim_trust(f32::NAN, 1.0), 0.0);
+        // No median (0, or not finite): every cell counts fully.
+        assert_eq!(rim_trust(0.1, 0.0), 1.0);
+        assert_eq!(rim_trust(0.1, f32::NAN), 1.0);
+    }
+
+    /// A wide round dent whose hysteresis region runs on into the rim,
+    /// where the rest density falls off and a frame's ratio is unreliable:
+    /// the rim's cells, weighted by their rest density, move the centroid a
+    /// quarter as far as when they count fully.
+    #[test]
+    fn a_wide_dent_keeps_its_centre_when_its_region_runs_into_the_rim() {
+        let grid = Grid::new(320, 160, 8);
+        let (nx, ny) = (grid.nx, grid.ny);
+        let (ci, cj) = (24.0, 10.0);
+        let mut rest = vec![1.0f32; nx * ny];
+        let mut frame = vec![1.0f32; nx * ny];
+        for j in 0..ny {
+            for i in 0..nx {
+                let k = j * nx + i;
+                let d2 = (i as f64 - ci).powi(2) + (j as f64 - cj).powi(2);
+                let dent = 1.0 - 0.5 * (1.0 - d2 / 49.0).max(0.0);
+                // The rim: the rest density falls off over the last 9 columns.
+                if i > 30 {
+                    rest[k] = 1.0 - 0.1 * (i - 30) as f32;
+                }
+                // A tail of low ratio from the dent's edge into the rim.
+                let tail = i > 30 && (8..13).contains(&j);
+                let ratio = if tail { dent.min(0.7) } else { dent };
+                frame[k] = ratio as f32 * rest[k];
+            }
+        }
+        let map = DensityMap {
+            grid,
+            roi: grid.full(),
+            values_per_mm2: frame,
+        };
+        let rest = DensityMap {
+            grid,
+            roi: grid.full(),
+            values_per_mm2: rest,
+        };
+        let mask = vec![true; nx * ny];
+        let truth = grid.point(ci, cj);
+        let trusted = DensityReference {
+            rest_median_per_mm2: 1.0,
+            ..DensityReference::flat(&rest, &mask)
+        };
+        let off = |r: &DensityReference| {
+            let region = segment(&map, r, &loose(), 0.1).unwrap();
+            region.centre.x - truth.x
+        };
+        let (with, without) = (off(&trusted), off(&DensityReference::flat(&rest, &mask)));
+        // Measured: 4.8 px with, 23.6 px without.
+        assert!(without > 15.0, "{without} px off without it");
+        assert!(
+            with.abs() < 0.25 * without,
+            "{with} px off with the rim weighted"
+        );
+    }
+
+    /// Markers on a lattice; those at distance `r` from `c` moved by
+    /// `moved(r, direction from c)`, the rest by a tiny deterministic jitter.
+    fn field_around(
+        c: PointPx,
+        moved: impl Fn(f64, (f64, f64)) -> (f64, f64),
+    ) -> (Vec<PointPx>, Field) {
+        let rest = crate::test_fixtures::hex_points(320, 320, 15.0);
+        let mut rng = crate::synth::Rng::new(7);
+        let known: Vec<(usize, PointPx)> = rest
+            .iter()
+            .enumerate()
+            .map(|(n, p)| {
+                let (dx, dy) = (p.x - c.x, p.y - c.y);
+                let r = dx.hypot(dy).max(1e-9);
+                let (ux, uy) = moved(r, (dx / r, dy / r));
+                (
+                    n,
+                    PointPx::new(
+                        p.x + ux + 0.02 * rng.normal(),
+                        p.y + uy + 0.02 * rng.normal(),
+                    ),
+                )
+            })
+            .collect();
+        let params = ContactParams::default();
+        let field = tracking::track_known_adaptive(
+            &rest,
+            known,
+            params.move_noise_px,
+            params.move_noise_sigmas,
+        );
+        (rest, field)
+    }
+
+    /// A shallow flat punch 45 px in radius: only the ring at its edge moves
+    /// (outwards, up to 3 px). No marker near the centre moved, so the small
+    /// contact's rule (centre within 1.5 pitches of the most moved marker)
+    /// cannot take it; the shallow rule finds its centre.
+    #[test]
+    fn a_shallow_wide_punch_is_found_from_its_ring() {
+        let c = PointPx::new(161.3, 158.2);
+        let ring = |r: f64, (ex, ey): (f64, f64)| {
+            let m = 3.0 * (-((r - 45.0) / 8.0).powi(2)).exp();
+            (m * ex, m * ey)
+        };
+        let (rest, field) = field_around(c, ring);
+        let params = ContactParams::default();
+        let s = Surface::Flat;
+        assert!(small_contact(&rest, &field, &s, 15.0, &params, 0.1).is_none());
+        let found = locate(None, &rest, &field, &s, 15.0, &params, 0.1).expect("found");
+        assert_eq!(found.source, Source::Tracking);
+        assert!(dist(found.centre, c) < 0.5, "{:?}", found.centre);
+        // Radius of the median moved marker: the ring, 4.5 mm at 0.1 mm/px.
+        let r_mm = (found.area_mm2 / std::f64::consts::PI).sqrt();
+        assert!((r_mm - 4.5).abs() < 1.0, "{r_mm} mm");
+
+        // Half a ring (one side moved): the lines meet only from one side.
+        let half = |r: f64, e: (f64, f64)| if e.0 > 0.0 { ring(r, e) } else { (0.0, 0.0) };
+        let (rest, field) = field_around(c, half);
+        assert!(shallow_contact(&rest, &field, &s, 15.0, &params, 0.1).is_none());
+        // A patch dragged sideways (shear, no press): parallel lines.
+        let drag = |r: f64, _| if r < 60.0 { (3.0, 0.0) } else { (0.0, 0.0) };
+        let (rest, field) = field_around(c, drag);
+        assert!(locate(None, &rest, &field, &s, 15.0, &params, 0.1).is_none());
     }
 
     proptest::proptest! {

@@ -175,19 +175,13 @@ impl Pipeline {
             let map = density::estimate(&positions, &cal.density, roi);
             density_cells = map.roi.area();
             t2 = Instant::now();
-            region = contact::segment(
-                &map,
-                &cal.rest_density,
-                &cal.mask,
-                cp,
-                cal.density.mm_per_px,
-            )
-            // With the tracked markers at hand, a region narrower than a dent
-            // is theirs to judge; the paper's density-only method keeps it.
-            .filter(|r| {
-                cp.centre == CentreMethod::Density
-                    || contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px)
-            });
+            region = contact::segment(&map, &cal.density_reference(), cp, cal.density.mm_per_px)
+                // With the tracked markers at hand, a region narrower than a dent
+                // is theirs to judge; the paper's density-only method keeps it.
+                .filter(|r| {
+                    cp.centre == CentreMethod::Density
+                        || contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px)
+                });
         }
         let contact = if skipped {
             None

@@ -209,8 +209,7 @@ fn segment_handles_zero_nan_and_infinite_densities() {
             roi: g.full(),
             values_per_mm2: vec![fill; g.nx * g.ny],
         };
-        if let Some(r) = contact::segment(&map, &cal.rest_density, &cal.mask, &params.contact, 0.1)
-        {
+        if let Some(r) = contact::segment(&map, &cal.density_reference(), &params.contact, 0.1) {
             assert!(
                 r.centre.is_finite() && r.area_mm2.is_finite(),
                 "{fill}: {r:?}"
