@@ -17,7 +17,11 @@
 //! around the region ([`crate::tracking::radial_centre_on`], in the chart of
 //! a domed skin, [`crate::surface`]) when that fit is consistent, and
 //! contacts too small to dent the density (width below ~h) are found from
-//! the tracked markers alone.
+//! the tracked markers alone, and so are wide contacts too shallow to dent
+//! it (a flat punch pressed a little: a ring of moved markers around a still
+//! centre). A region wider than the kernel is centred on its centroid,
+//! taken on the skin ([`SurfaceMean`]) with the rim's cells counting less
+//! ([`rim_trust`]).
 //!
 //! ```
 //! use dexitac_tactile::contact::{segment, DensityReference, Region};
@@ -434,7 +438,12 @@ pub const MAX_FIT_RESIDUAL_PX: f64 = 0.6;
 pub const MIN_INLIER_SHARE: f64 = 0.6;
 
 /// Stage 5 entry: the contact from the density region and the tracked
-/// markers, by `params.centre`.
+/// markers, by `params.centre`. Under [`CentreMethod::Hybrid`] without a
+/// region, a small contact (tracked markers around the most displaced one
+/// meet within 1.5 pitches of it) is tried first, then a shallow wide one
+/// (a ring of moved markers that meet from all sides,
+/// [`SHALLOW_REACH_PITCHES`], [`SHALLOW_MAX_SPREAD_RAD`],
+/// [`SHALLOW_MAX_RESULTANT`]).
 pub fn locate(
     region: Option<Region>,
     rest: &[PointPx],
@@ -602,7 +611,7 @@ fn strongest_move(field: &Field, pitch_px: f64) -> Option<(usize, f64)> {
 }
 
 /// A shallow contact's moved markers are gathered within this many pitches
-/// of its centre ([`shallow_contact`]).
+/// of its centre (the shallow-contact rule of [`locate`]).
 pub const SHALLOW_REACH_PITCHES: f64 = 5.0;
 /// A shallow contact's displacement lines may miss its centre by this much
 /// RMS, as an angle seen from the centre: the share of the median distance
