@@ -598,6 +598,25 @@ def sample_contact(cat: str, sensor, rng: np.random.Generator) -> dict:
     return dict(kind=kind, a=a, ri=ri, delta=delta, c=c, shear=shear)
 
 
+def sensor_of(cat: str, seed: int):
+    """The sensor a category's frames show (its pins laid out by ``seed``)."""
+    if cat == "flat_nominal":
+        return Flat(np.random.default_rng([seed, 1001]))
+    return Dome(np.random.default_rng([seed, 1000]), coloured=cat == "two_colour")
+
+
+def frame_contacts(cat: str, sensor, seed: int, k: int):
+    """Per frame of a category: its index, its generator (after the contact
+    was drawn; the frame's conditions and noise come next) and its contact
+    (None for a frame without one, 10 % of them, or all in no_contact)."""
+    rng = np.random.default_rng([seed, CATEGORIES.index(cat)])
+    n_free = k if cat == "no_contact" else max(1, round(0.1 * k))
+    free = set(rng.choice(k, n_free, replace=False).tolist())
+    for i in range(k):
+        frng = np.random.default_rng([seed, CATEGORIES.index(cat), i])
+        yield i, frng, (None if i in free else sample_contact(cat, sensor, frng))
+
+
 def write_png(path: Path, img: np.ndarray) -> None:
     cv2.imwrite(str(path), img[..., ::-1] if img.ndim == 3 else img)
 
@@ -612,9 +631,9 @@ def main() -> int:
     out = Path(a.out)
     t0 = time.time()
     sensors = {
-        "dome": Scene(Dome(np.random.default_rng([a.seed, 1000]))),
-        "flat": Scene(Flat(np.random.default_rng([a.seed, 1001]))),
-        "dome_rgb": Scene(Dome(np.random.default_rng([a.seed, 1000]), coloured=True)),
+        "dome": Scene(sensor_of("nominal", a.seed)),
+        "flat": Scene(sensor_of("flat_nominal", a.seed)),
+        "dome_rgb": Scene(sensor_of("two_colour", a.seed)),
     }
     rests = {}
     for name, sc in sensors.items():
@@ -627,14 +646,9 @@ def main() -> int:
         for old in (d / "frames").glob("*.png"):
             old.unlink()
         write_png(d / "rest.png", rests[sname])
-        rng = np.random.default_rng([a.seed, CATEGORIES.index(cat)])
         k = a.frames_per_category
-        n_free = k if cat == "no_contact" else max(1, round(0.1 * k))
-        free = set(rng.choice(k, n_free, replace=False).tolist())
         rows, crow = [], []
-        for i in range(k):
-            frng = np.random.default_rng([a.seed, CATEGORIES.index(cat), i])
-            contact = None if i in free else sample_contact(cat, sc.s, frng)
+        for i, frng, contact in frame_contacts(cat, sc.s, a.seed, k):
             cond = frame_condition(cat, frng)
             img, truth, n_vis = sc.render(contact, cond, frng)
             name = f"{i:04d}"
