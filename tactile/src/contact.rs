@@ -626,9 +626,10 @@ pub const SHALLOW_MAX_RESULTANT: f64 = 0.5;
 /// [`small_contact`]: a ring of outward-moved markers around a centre that
 /// moved little. A flat punch pressed a little does this: the skin under it
 /// moves as one and only the pins at its edge tilt (measured on the other
-/// renderer: a 3.3 mm wide punch 0.75 mm deep left the density at 0.81 of
-/// rest at least, above the 0.80 threshold, and moved its ring's markers
-/// by up to 2.6 px). The moved markers within [`SHALLOW_REACH_PITCHES`] of
+/// renderer: a punch 3.3 mm in radius, 0.75 mm deep, left the density at
+/// 0.81 of rest at least, above the 0.80 threshold; the renderer's true pin
+/// positions moved by up to 7.1 px at its edge and 2.5 px within 25 px of
+/// its centre). The moved markers within [`SHALLOW_REACH_PITCHES`] of
 /// the most displaced one give a first centre; the moved markers around that
 /// centre give the next, three fits in all. Accepted when at least twice
 /// `min_moved_markers` lines meet there ([`MIN_INLIER_SHARE`] of the
