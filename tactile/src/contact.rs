@@ -481,8 +481,15 @@ pub fn locate(
             }
         }
         (CentreMethod::Hybrid, None) => {
-            small_contact(rest, field, surface, pitch_px, params, mm_per_px)
-                .or_else(|| shallow_contact(rest, field, surface, pitch_px, params, mm_per_px))
+            let t = TrackedMarkers {
+                rest,
+                field,
+                surface,
+                pitch_px,
+                params,
+                mm_per_px,
+            };
+            small_contact(&t).or_else(|| shallow_contact(&t))
         }
     }
 }
@@ -544,14 +551,15 @@ pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
 /// a direction tolerance that grows with the jitter
 /// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
 /// through one point.
-fn small_contact(
-    rest: &[PointPx],
-    field: &Field,
-    surface: &Surface,
-    pitch_px: f64,
-    params: &ContactParams,
-    mm_per_px: f64,
-) -> Option<Contact> {
+fn small_contact(t: &TrackedMarkers) -> Option<Contact> {
+    let TrackedMarkers {
+        rest,
+        field,
+        surface,
+        pitch_px,
+        params,
+        mm_per_px,
+    } = *t;
     let seed = strongest_move(field, pitch_px)?;
     let support_px = if field.jitter_px > 0.0 {
         (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
@@ -581,16 +589,37 @@ fn small_contact(
     if !ok {
         return None;
     }
-    if d.is_empty() {
+    Some(tracking_contact(fit.centre, median(&mut d)?, mm_per_px))
+}
+
+/// The tracked markers the tracking-only rules of [`locate`] look at.
+#[derive(Clone, Copy)]
+struct TrackedMarkers<'a> {
+    rest: &'a [PointPx],
+    field: &'a Field,
+    surface: &'a Surface,
+    pitch_px: f64,
+    params: &'a ContactParams,
+    mm_per_px: f64,
+}
+
+/// A contact found from tracked markers alone, its area the disc through
+/// the median moved marker at `radius_px`.
+fn tracking_contact(centre: PointPx, radius_px: f64, mm_per_px: f64) -> Contact {
+    Contact {
+        centre,
+        area_mm2: std::f64::consts::PI * (radius_px * mm_per_px).powi(2),
+        source: Source::Tracking,
+    }
+}
+
+/// The median of `v` (`None` when empty); reorders `v`.
+fn median(v: &mut [f64]) -> Option<f64> {
+    if v.is_empty() {
         return None;
     }
-    let k = d.len() / 2;
-    let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
-    Some(Contact {
-        centre: fit.centre,
-        area_mm2: std::f64::consts::PI * (r_px * mm_per_px).powi(2),
-        source: Source::Tracking,
-    })
+    let k = v.len() / 2;
+    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
 }
 
 /// The displacement of rest marker `n`, px (`None` when lost).
@@ -637,14 +666,15 @@ pub const SHALLOW_MAX_RESULTANT: f64 = 0.5;
 /// ([`SHALLOW_MAX_RESULTANT`]): a shear or a drift moves markers in
 /// parallel, and lines that only meet from one side place the centre
 /// poorly along them.
-fn shallow_contact(
-    rest: &[PointPx],
-    field: &Field,
-    surface: &Surface,
-    pitch_px: f64,
-    params: &ContactParams,
-    mm_per_px: f64,
-) -> Option<Contact> {
+fn shallow_contact(t: &TrackedMarkers) -> Option<Contact> {
+    let TrackedMarkers {
+        rest,
+        field,
+        surface,
+        pitch_px,
+        params,
+        mm_per_px,
+    } = *t;
     let (seed, _) = strongest_move(field, pitch_px)?;
     let reach = SHALLOW_REACH_PITCHES * pitch_px;
     let mut centre = rest[seed];
@@ -676,22 +706,14 @@ fn shallow_contact(
             d.push(dist(rest[n], fit.centre));
         }
     }
-    if d.is_empty() {
-        return None;
-    }
     let resultant = sx.hypot(sy) / d.len() as f64;
-    let k = d.len() / 2;
-    let r_px = *d.select_nth_unstable_by(k, f64::total_cmp).1;
+    let r_px = median(&mut d)?;
     let ok = fit.n_inliers >= 2 * params.min_moved_markers
         && fit.inlier_share >= MIN_INLIER_SHARE
         && fit.residual_px <= MAX_FIT_RESIDUAL_PX.max(SHALLOW_MAX_SPREAD_RAD * r_px)
         && resultant <= SHALLOW_MAX_RESULTANT
         && dist(fit.centre, rest[seed]) <= reach;
-    ok.then(|| Contact {
-        centre: fit.centre,
-        area_mm2: std::f64::consts::PI * (r_px * mm_per_px).powi(2),
-        source: Source::Tracking,
-    })
+    ok.then(|| tracking_contact(fit.centre, r_px, mm_per_px))
 }
 
 /// Moved rest markers within `reach_px` of `c`.
@@ -1114,7 +1136,15 @@ mod tests {
         let (rest, field) = field_around(c, ring);
         let params = ContactParams::default();
         let s = Surface::Flat;
-        assert!(small_contact(&rest, &field, &s, 15.0, &params, 0.1).is_none());
+        let tracked = |rest, field| TrackedMarkers {
+            rest,
+            field,
+            surface: &s,
+            pitch_px: 15.0,
+            params: &params,
+            mm_per_px: 0.1,
+        };
+        assert!(small_contact(&tracked(&rest, &field)).is_none());
         let found = locate(None, &rest, &field, &s, 15.0, &params, 0.1).expect("found");
         assert_eq!(found.source, Source::Tracking);
         assert!(dist(found.centre, c) < 0.5, "{:?}", found.centre);
@@ -1125,7 +1155,7 @@ mod tests {
         // Half a ring (one side moved): the lines meet only from one side.
         let half = |r: f64, e: (f64, f64)| if e.0 > 0.0 { ring(r, e) } else { (0.0, 0.0) };
         let (rest, field) = field_around(c, half);
-        assert!(shallow_contact(&rest, &field, &s, 15.0, &params, 0.1).is_none());
+        assert!(shallow_contact(&tracked(&rest, &field)).is_none());
         // A patch dragged sideways (shear, no press): parallel lines.
         let drag = |r: f64, _| if r < 60.0 { (3.0, 0.0) } else { (0.0, 0.0) };
         let (rest, field) = field_around(c, drag);
