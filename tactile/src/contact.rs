@@ -552,44 +552,44 @@ pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
 /// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
 /// through one point.
 fn small_contact(t: &TrackedMarkers) -> Option<Contact> {
-    let TrackedMarkers {
-        rest,
-        field,
-        surface,
-        pitch_px,
-        params,
-        mm_per_px,
-    } = *t;
-    let seed = strongest_move(field, pitch_px)?;
-    let support_px = if field.jitter_px > 0.0 {
-        (SUPPORT_SIGMAS * field.jitter_px).min(field.moved_px)
+    let seed = strongest_move(t.field, t.pitch_px)?;
+    let support_px = if t.field.jitter_px > 0.0 {
+        (SUPPORT_SIGMAS * t.field.jitter_px).min(t.field.moved_px)
     } else {
-        field.moved_px
+        t.field.moved_px
     };
-    let centre = rest[seed.0];
-    let reach = 2.5 * pitch_px;
-    let near: Vec<usize> = rest
+    let centre = t.rest[seed.0];
+    let reach = 2.5 * t.pitch_px;
+    let near: Vec<usize> = t
+        .rest
         .iter()
         .enumerate()
         .filter(|&(n, &p)| {
-            dist(p, centre) <= reach && magnitude(field, n).is_some_and(|m| m > support_px)
+            dist(p, centre) <= reach && magnitude(t.field, n).is_some_and(|m| m > support_px)
         })
         .map(|(n, _)| n)
         .collect();
-    let fit = tracking::radial_centre_on(surface, rest, field, &near, support_px, field.jitter_px)?;
+    let fit = tracking::radial_centre_on(
+        t.surface,
+        t.rest,
+        t.field,
+        &near,
+        support_px,
+        t.field.jitter_px,
+    )?;
     let mut d: Vec<f64> = near
         .iter()
-        .filter(|&&n| magnitude(field, n).is_some_and(|m| m > field.moved_px))
-        .map(|&n| dist(rest[n], fit.centre))
+        .filter(|&&n| magnitude(t.field, n).is_some_and(|m| m > t.field.moved_px))
+        .map(|&n| dist(t.rest[n], fit.centre))
         .collect();
-    let ok = fit.n_inliers >= params.min_moved_markers
+    let ok = fit.n_inliers >= t.params.min_moved_markers
         && d.len() >= 2
         && fit.inlier_share >= 0.6
-        && dist(fit.centre, centre) <= 1.5 * pitch_px;
+        && dist(fit.centre, centre) <= 1.5 * t.pitch_px;
     if !ok {
         return None;
     }
-    Some(tracking_contact(fit.centre, median(&mut d)?, mm_per_px))
+    Some(tracking_contact(fit.centre, median(&mut d)?, t.mm_per_px))
 }
 
 /// The tracked markers the tracking-only rules of [`locate`] look at.
@@ -667,53 +667,45 @@ pub const SHALLOW_MAX_RESULTANT: f64 = 0.5;
 /// parallel, and lines that only meet from one side place the centre
 /// poorly along them.
 fn shallow_contact(t: &TrackedMarkers) -> Option<Contact> {
-    let TrackedMarkers {
-        rest,
-        field,
-        surface,
-        pitch_px,
-        params,
-        mm_per_px,
-    } = *t;
-    let (seed, _) = strongest_move(field, pitch_px)?;
-    let reach = SHALLOW_REACH_PITCHES * pitch_px;
-    let mut centre = rest[seed];
+    let (seed, _) = strongest_move(t.field, t.pitch_px)?;
+    let reach = SHALLOW_REACH_PITCHES * t.pitch_px;
+    let mut centre = t.rest[seed];
     let mut near = Vec::new();
     let mut fit = None;
     for _ in 0..3 {
-        near = near_markers(rest, field, centre, reach);
+        near = near_markers(t.rest, t.field, centre, reach);
         let f = tracking::radial_centre_on(
-            surface,
-            rest,
-            field,
+            t.surface,
+            t.rest,
+            t.field,
             &near,
-            field.moved_px,
-            field.jitter_px,
+            t.field.moved_px,
+            t.field.jitter_px,
         )?;
         centre = f.centre;
         fit = Some(f);
     }
     let fit = fit?;
-    let c = surface.to_chart(fit.centre);
+    let c = t.surface.to_chart(fit.centre);
     let (mut sx, mut sy) = (0.0, 0.0);
     let mut d: Vec<f64> = Vec::with_capacity(near.len());
     for &n in &near {
-        let q = surface.to_chart(rest[n]);
+        let q = t.surface.to_chart(t.rest[n]);
         let l = dist(q, c);
         if l > 0.0 && l.is_finite() {
             sx += (q.x - c.x) / l;
             sy += (q.y - c.y) / l;
-            d.push(dist(rest[n], fit.centre));
+            d.push(dist(t.rest[n], fit.centre));
         }
     }
     let resultant = sx.hypot(sy) / d.len() as f64;
     let r_px = median(&mut d)?;
-    let ok = fit.n_inliers >= 2 * params.min_moved_markers
+    let ok = fit.n_inliers >= 2 * t.params.min_moved_markers
         && fit.inlier_share >= MIN_INLIER_SHARE
         && fit.residual_px <= MAX_FIT_RESIDUAL_PX.max(SHALLOW_MAX_SPREAD_RAD * r_px)
         && resultant <= SHALLOW_MAX_RESULTANT
-        && dist(fit.centre, rest[seed]) <= reach;
-    ok.then(|| tracking_contact(fit.centre, r_px, mm_per_px))
+        && dist(fit.centre, t.rest[seed]) <= reach;
+    ok.then(|| tracking_contact(fit.centre, r_px, t.mm_per_px))
 }
 
 /// Moved rest markers within `reach_px` of `c`.
