@@ -689,7 +689,9 @@ fn shallow_contact(t: &TrackedMarkers) -> Option<Contact> {
     let c = t.surface.to_chart(fit.centre);
     let (mut sx, mut sy) = (0.0, 0.0);
     let mut d: Vec<f64> = Vec::with_capacity(near.len());
-    for &n in &near {
+    // The markers that moved (not the lost ones): where they lie around
+    // the centre, and how far out.
+    for &n in near.iter().filter(|&&n| magnitude(t.field, n).is_some()) {
         let q = t.surface.to_chart(t.rest[n]);
         let l = dist(q, c);
         if l > 0.0 && l.is_finite() {
@@ -698,8 +700,8 @@ fn shallow_contact(t: &TrackedMarkers) -> Option<Contact> {
             d.push(dist(t.rest[n], fit.centre));
         }
     }
-    let resultant = sx.hypot(sy) / d.len() as f64;
     let r_px = median(&mut d)?;
+    let resultant = sx.hypot(sy) / d.len() as f64;
     let ok = fit.n_inliers >= 2 * t.params.min_moved_markers
         && fit.inlier_share >= MIN_INLIER_SHARE
         && fit.residual_px <= MAX_FIT_RESIDUAL_PX.max(SHALLOW_MAX_SPREAD_RAD * r_px)
