@@ -48,10 +48,9 @@ def kde(xy: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
 
 
 def positions(sensor, contact) -> tuple[np.ndarray, np.ndarray | None]:
-    p3, q2, tilt, u_dir, grow, truth = R.deform(sensor, contact)
-    xy, _ = R.marker_jacobians(sensor, p3, q2, tilt, u_dir, grow)
-    inside = (xy[:, 0] >= -0.5) & (xy[:, 0] < R.W - 0.5) & (xy[:, 1] >= -0.5) & (xy[:, 1] < R.H - 0.5)
-    return xy[inside], truth
+    """The true centres of the pins inside the image, and the truth centre."""
+    xy, _, _, _, truth = R.pins(sensor, contact)
+    return xy[R.in_frame(xy)], truth
 
 
 def centre(

@@ -437,6 +437,19 @@ def marker_jacobians(sensor, p3, q2, tilt, u_dir, grow):
     return p0, np.stack([j1, j2], -1)  # (n, 2, 2): columns are the semi-axes
 
 
+def pins(sensor, contact):
+    """The pins pressed by ``contact`` (None: at rest): image positions, the
+    Jacobians of their discs, their tilt and growth, and the truth centre."""
+    p3, q2, tilt, u_dir, grow, truth = deform(sensor, contact)
+    xy, jac = marker_jacobians(sensor, p3, q2, tilt, u_dir, grow)
+    return xy, jac, tilt, grow, truth
+
+
+def in_frame(xy: np.ndarray) -> np.ndarray:
+    """Which of the pin centres ``xy`` lie inside the image (the ones truth counts)."""
+    return (xy[:, 0] >= -0.5) & (xy[:, 0] < W - 0.5) & (xy[:, 1] >= -0.5) & (xy[:, 1] < H - 0.5)
+
+
 def splat(xy: np.ndarray, jac: np.ndarray, amp: np.ndarray, edge_px: float = 0.9, shade: bool = True) -> np.ndarray:
     """Soft-edged elliptical discs (flat top, slight dome) summed into an image."""
     out = np.zeros(H * W)
@@ -502,8 +515,7 @@ class Scene:
 
     def render(self, contact, cond: dict, rng: np.random.Generator):
         s = self.s
-        p3, q2, tilt, ud, grow, truth = deform(s, contact)
-        xy, jac = marker_jacobians(s, p3, q2, tilt, ud, grow)
+        xy, jac, tilt, grow, truth = pins(s, contact)
         tex = s.texture
         if contact is not None:  # the skin's texture moves with the skin
             disp = xy - self.rest_xy
@@ -517,7 +529,7 @@ class Scene:
         skin = s.skin_mask * (s.skin_level + tex)
         base = skin + (1 - s.skin_mask) * s.housing + self.dust_img
         lf = light_field(cond["gain"], cond["vig"], cond["grad"], cond["grad_dir"])
-        inside = (xy[:, 0] >= -0.5) & (xy[:, 0] < W - 0.5) & (xy[:, 1] >= -0.5) & (xy[:, 1] < H - 0.5)
+        inside = in_frame(xy)
         if s.blue.any():
             white = splat(xy[~s.blue], jac[~s.blue], amp[~s.blue] - 20)
             blue = splat(xy[s.blue], jac[s.blue], amp[s.blue] - 20)
