@@ -489,7 +489,8 @@ pub fn locate(
                 params,
                 mm_per_px,
             };
-            small_contact(&t).or_else(|| shallow_contact(&t))
+            let seed = strongest_move(field, pitch_px)?;
+            small_contact(&t, seed).or_else(|| shallow_contact(&t, seed))
         }
     }
 }
@@ -551,14 +552,13 @@ pub fn worth_a_look(field: &Field, pitch_px: f64) -> bool {
 /// a direction tolerance that grows with the jitter
 /// ([`tracking::radial_centre_noisy`]); it needs `min_moved_markers` lines
 /// through one point.
-fn small_contact(t: &TrackedMarkers) -> Option<Contact> {
-    let seed = strongest_move(t.field, t.pitch_px)?;
+fn small_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
     let support_px = if t.field.jitter_px > 0.0 {
         (SUPPORT_SIGMAS * t.field.jitter_px).min(t.field.moved_px)
     } else {
         t.field.moved_px
     };
-    let centre = t.rest[seed.0];
+    let centre = t.rest[seed];
     let reach = 2.5 * t.pitch_px;
     let near: Vec<usize> = t
         .rest
@@ -628,15 +628,15 @@ fn magnitude(field: &Field, n: usize) -> Option<f64> {
     Some(u.x.hypot(u.y))
 }
 
-/// The most displaced moved marker and its displacement, when that is a
-/// strong move ([`strong_move_px`]).
-fn strongest_move(field: &Field, pitch_px: f64) -> Option<(usize, f64)> {
+/// The most displaced moved marker, when that is a strong move
+/// ([`strong_move_px`]): where the tracking-only rules start.
+fn strongest_move(field: &Field, pitch_px: f64) -> Option<usize> {
     let seed = field
         .moved
         .iter()
         .filter_map(|&n| Some((n, magnitude(field, n)?)))
         .max_by(|a, b| a.1.total_cmp(&b.1))?;
-    (seed.1 > strong_move_px(field, pitch_px)).then_some(seed)
+    (seed.1 > strong_move_px(field, pitch_px)).then_some(seed.0)
 }
 
 /// A shallow contact's moved markers are gathered within this many pitches
@@ -666,8 +666,7 @@ pub const SHALLOW_MAX_RESULTANT: f64 = 0.5;
 /// ([`SHALLOW_MAX_RESULTANT`]): a shear or a drift moves markers in
 /// parallel, and lines that only meet from one side place the centre
 /// poorly along them.
-fn shallow_contact(t: &TrackedMarkers) -> Option<Contact> {
-    let (seed, _) = strongest_move(t.field, t.pitch_px)?;
+fn shallow_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
     let reach = SHALLOW_REACH_PITCHES * t.pitch_px;
     let mut centre = t.rest[seed];
     let mut near = Vec::new();
@@ -1138,7 +1137,8 @@ mod tests {
             params: &params,
             mm_per_px: 0.1,
         };
-        assert!(small_contact(&tracked(&rest, &field)).is_none());
+        let seed = strongest_move(&field, 15.0).expect("a strong move");
+        assert!(small_contact(&tracked(&rest, &field), seed).is_none());
         let found = locate(None, &rest, &field, &s, 15.0, &params, 0.1).expect("found");
         assert_eq!(found.source, Source::Tracking);
         assert!(dist(found.centre, c) < 0.5, "{:?}", found.centre);
@@ -1149,7 +1149,8 @@ mod tests {
         // Half a ring (one side moved): the lines meet only from one side.
         let half = |r: f64, e: (f64, f64)| if e.0 > 0.0 { ring(r, e) } else { (0.0, 0.0) };
         let (rest, field) = field_around(c, half);
-        assert!(shallow_contact(&tracked(&rest, &field)).is_none());
+        let seed = strongest_move(&field, 15.0).expect("a strong move");
+        assert!(shallow_contact(&tracked(&rest, &field), seed).is_none());
         // A patch dragged sideways (shear, no press): parallel lines.
         let drag = |r: f64, _| if r < 60.0 { (3.0, 0.0) } else { (0.0, 0.0) };
         let (rest, field) = field_around(c, drag);
