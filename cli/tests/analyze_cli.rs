@@ -108,6 +108,7 @@ fn analyze_writes_centres_matching_the_truth() {
     let fx = fixture();
     let out = fx.root.join("pred.csv");
     let markers = fx.root.join("markers");
+    let field = fx.root.join("field");
     let r = run(&[
         "analyze",
         "--rest",
@@ -116,6 +117,8 @@ fn analyze_writes_centres_matching_the_truth() {
         out.to_str().unwrap(),
         "--markers-out",
         markers.to_str().unwrap(),
+        "--field-out",
+        field.to_str().unwrap(),
         fx.root.join("frames").to_str().unwrap(),
     ]);
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
@@ -147,6 +150,50 @@ fn analyze_writes_centres_matching_the_truth() {
         let m = std::fs::read_to_string(markers.join(format!("{name}.csv"))).unwrap();
         assert!(m.starts_with("x,y\n"));
         assert_eq!(m.lines().count(), row.3 + 1);
+        check_field(&field.join(format!("{name}.csv")), *truth);
+    }
+}
+
+/// A frame's `--field-out` CSV: one row per rest marker, nearly all of them
+/// in place without a contact; with one, the markers that moved more than
+/// 2 px lie around it.
+fn check_field(path: &Path, truth: Option<PointPx>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    assert!(
+        text.starts_with("rest_x,rest_y,x,y\n"),
+        "{}",
+        path.display()
+    );
+    let rows: Vec<Vec<Option<f64>>> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').map(|v| v.parse().ok()).collect())
+        .collect();
+    assert!(rows.len() > 500, "{} rest markers", rows.len());
+    let moved: Vec<(f64, f64)> = rows
+        .iter()
+        .filter_map(|r| {
+            let (rx, ry) = (r[0].unwrap(), r[1].unwrap());
+            let (x, y) = (r[2]?, r[3]?);
+            ((x - rx).hypot(y - ry) > 2.0).then_some((rx, ry))
+        })
+        .collect();
+    let lost = rows.iter().filter(|r| r[2].is_none()).count();
+    match truth {
+        None => assert!(
+            moved.len() + lost <= rows.len() / 100,
+            "no contact: {} moved, {lost} lost",
+            moved.len()
+        ),
+        Some(t) => {
+            assert!(moved.len() >= 5, "{} moved", moved.len());
+            for (x, y) in moved {
+                assert!(
+                    (x - t.x).hypot(y - t.y) < 80.0,
+                    "({x}, {y}) moved, far from the contact {t:?}"
+                );
+            }
+        }
     }
 }
 

@@ -50,6 +50,11 @@ pub struct AnalyzeArgs {
     /// Write the detected markers of each frame to `DIR/<frame>.csv` (x,y).
     #[arg(long, value_name = "DIR")]
     markers_out: Option<PathBuf>,
+    /// Write the displacement field of each frame to `DIR/<frame>.csv`: one
+    /// row per rest marker, `rest_x,rest_y,x,y` (x, y empty when the marker
+    /// is lost), input px.
+    #[arg(long, value_name = "DIR")]
+    field_out: Option<PathBuf>,
     /// Frames (PNG or JPEG files, or directories of them).
     #[arg(required = true, value_name = "FRAME")]
     frames: Vec<PathBuf>,
@@ -187,21 +192,12 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     );
     let pipeline = Pipeline::new(cal, params.clone());
 
-    if let Some(dir) = &args.markers_out {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))?;
-        // Marker files of an earlier run would mix with these: refuse
-        // rather than delete CSVs that may be someone else's.
-        let old = std::fs::read_dir(dir)
-            .map_err(|e| anyhow!("cannot list {}: {e}", dir.display()))?
-            .filter_map(Result::ok)
-            .filter(|e| e.path().extension().is_some_and(|x| x == "csv"))
-            .count();
-        if old > 0 {
-            return Err(anyhow!(
-                "--markers-out {} already holds {old} CSV file(s): give an empty or new folder",
-                dir.display()
-            ));
+    for (flag, dir) in [
+        ("--markers-out", &args.markers_out),
+        ("--field-out", &args.field_out),
+    ] {
+        if let Some(dir) = dir {
+            empty_csv_dir(flag, dir)?;
         }
     }
     let out = File::create(&args.out)
@@ -224,7 +220,10 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
             &pipeline,
             &params,
             (rest_w, rest_h),
-            args.markers_out.as_deref(),
+            Outputs {
+                markers: args.markers_out.as_deref(),
+                field: args.field_out.as_deref(),
+            },
         ) {
             Ok(Row {
                 mut fields,
@@ -283,7 +282,7 @@ fn analyze_one(
     pipeline: &Pipeline,
     params: &Params,
     rest_size: (usize, usize),
-    markers_out: Option<&Path>,
+    outputs: Outputs<'_>,
 ) -> anyhow::Result<Row> {
     let d = decode(path)?;
     if (d.width, d.height) != rest_size {
@@ -301,11 +300,16 @@ fn analyze_one(
     // Frame preparation (grey, crop, rescale) counts as part of detection.
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
     let r = pipeline.run(&prepared.grey).map_err(|e| anyhow!("{e}"))?;
-    if let Some(dir) = markers_out {
-        write_markers(
-            &dir.join(format!("{}.csv", label.replace('/', "__"))),
+    let file = |dir: &Path| dir.join(format!("{}.csv", label.replace('/', "__")));
+    if let Some(dir) = outputs.markers {
+        write_markers(&file(dir), &prepared, &r.markers.positions())?;
+    }
+    if let Some(dir) = outputs.field {
+        write_field(
+            &file(dir),
             &prepared,
-            &r.markers.positions(),
+            &pipeline.calibration.rest_markers,
+            &r.field.displacement,
         )?;
     }
     if r.markers.is_empty() {
@@ -420,6 +424,60 @@ fn frame_labels(files: &[PathBuf]) -> Vec<String> {
 }
 
 /// One frame's markers, input-image px (`x,y`, 3 decimals).
+/// Where [`analyze_one`] writes each frame's markers and displacement
+/// field (`--markers-out`, `--field-out`), if anywhere.
+#[derive(Clone, Copy)]
+struct Outputs<'a> {
+    markers: Option<&'a Path>,
+    field: Option<&'a Path>,
+}
+
+/// Creates `dir` for `flag`'s per-frame CSVs, or refuses one that holds
+/// CSVs already: files of an earlier run would mix with these, and they may
+/// be someone else's to delete.
+fn empty_csv_dir(flag: &str, dir: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow!("cannot create {}: {e}", dir.display()))?;
+    let old = std::fs::read_dir(dir)
+        .map_err(|e| anyhow!("cannot list {}: {e}", dir.display()))?
+        .filter_map(Result::ok)
+        .filter(|e| e.path().extension().is_some_and(|x| x == "csv"))
+        .count();
+    if old > 0 {
+        return Err(anyhow!(
+            "{flag} {} already holds {old} CSV file(s): give an empty or new folder",
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
+/// One row per rest marker: its rest place and where the frame has it
+/// (empty when lost), input px.
+fn write_field(
+    path: &Path,
+    prepared: &Prepared,
+    rest: &[PointPx],
+    displacement: &[Option<PointPx>],
+) -> anyhow::Result<()> {
+    let err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
+    let mut f = csv::Writer::from_path(path).map_err(err)?;
+    f.write_record(["rest_x", "rest_y", "x", "y"])
+        .map_err(err)?;
+    let xy = |p: PointPx| {
+        let p = prepared.to_input(p);
+        [format!("{:.3}", p.x), format!("{:.3}", p.y)]
+    };
+    for (&r, u) in rest.iter().zip(displacement) {
+        let [rx, ry] = xy(r);
+        let [x, y] = u.map_or([String::new(), String::new()], |u| {
+            xy(PointPx::new(r.x + u.x, r.y + u.y))
+        });
+        f.write_record([rx, ry, x, y]).map_err(err)?;
+    }
+    f.flush()
+        .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
+}
+
 fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> anyhow::Result<()> {
     let err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
     let mut f = csv::Writer::from_path(path).map_err(err)?;
