@@ -33,7 +33,9 @@
 //! ([`crate::surface`]) the strength threshold is eased by the
 //! foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
-//! ([`centroid_radii`]).
+//! ([`centroid_radii`]); where it is seen obliquely, a candidate too weak
+//! at the detection scale gets a second look at full resolution and the
+//! smallest lobe (the outer ring's pins nearly touch along the ring).
 //!
 //! The scale (lobe, and whether to detect on a 2x2-binned image for speed)
 //! is found from a rest frame by [`auto_detector`]: the lobe whose
@@ -344,9 +346,21 @@ fn detect_in(
         let tol = (PLATEAU_TOLERANCE * range).min(255.0) as u8;
         let (x, y) = plateau_centre(img, (w, h), (x, y), margin, tol, 3 * lobe);
         let (lo, range) = env.at(x, y);
-        let strength = determinant_at(&ii, w + 1, x, y, lobe).sqrt();
         let guess = to_work(x, y);
         let need = |p: PointPx| det.min_rel_strength * range * det.surface.foreshortening(p) as f32;
+        let mut strength = determinant_at(&ii, w + 1, x, y, lobe).sqrt();
+        if strength < need(guess)
+            && (bin > 1 || lobe > FINE_LOBE_PX)
+            && det.surface.foreshortening(guess) < FINE_MAX_FORESHORTENING
+        {
+            // Too weak a blob at this scale, or a ridge. Where the pins of
+            // a dome's outer ring, foreshortened to half their width,
+            // nearly touch along the ring, the binned lobes span two of
+            // them; at full resolution and the smallest lobe each is a
+            // blob again (on the other renderer's domes 2-4 of the outer
+            // ring's pins were missed at rest, and so in every frame).
+            strength = strength.max(fine_determinant(frame, guess).unwrap_or(0.0));
+        }
         let (strength, guess) = if strength >= need(guess) {
             (strength, guess)
         } else if strength >= GLINT_RETRY * need(guess)
@@ -1315,6 +1329,37 @@ fn bright_peaks(
     out
 }
 
+/// The smallest DoH lobe, full-resolution px ([`fine_determinant`]).
+const FINE_LOBE_PX: usize = 3;
+/// [`fine_determinant`] is tried only where a dome's skin is seen at least
+/// this obliquely (`cos(theta)`): its outer rings (the other renderer's
+/// outer ring is at 0.58; a real TacTip's at 0.6-0.7).
+const FINE_MAX_FORESHORTENING: f64 = 0.7;
+
+/// [`determinant_at`]'s strength (its square root) at the full-resolution
+/// pixel nearest to `p` with the smallest lobe, [`FINE_LOBE_PX`]; `None`
+/// where the filter would reach off the frame, or over a saturated pixel:
+/// at that scale the corners of a flat (saturated or binarised) pin are
+/// blobs too (on franka's thresholded TacTip taps, 1-4 of them per frame
+/// at the disc's rim, where the skin is as oblique as a dome's outer ring).
+fn fine_determinant(frame: &GreyFrame, p: PointPx) -> Option<f32> {
+    let lobe = FINE_LOBE_PX;
+    let reach = (3 * lobe - 1) / 2 + 1;
+    let (cx, cy) = (p.x.round() as i64, p.y.round() as i64);
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    let r = reach as i64;
+    if cx - r < 0 || cy - r < 0 || cx + r >= w || cy + r >= h {
+        return None;
+    }
+    let n = 2 * reach + 1;
+    let sub = crop(frame, (cx - r) as usize, (cy - r) as usize, n, n);
+    if sub.contains(&u8::MAX) {
+        return None;
+    }
+    let ii = integral(&sub, n, n);
+    Some(determinant_at(&ii, n + 1, reach, reach, lobe).sqrt())
+}
+
 /// Determinant of the box Hessian at one pixel (0 unless a bright blob);
 /// `(x, y)` must be at least `(3 lobe - 1) / 2` px inside the image.
 fn determinant_at(ii: &[u32], s: usize, x: usize, y: usize, lobe: usize) -> f32 {
@@ -2188,6 +2233,63 @@ mod tests {
             assert_eq!(matched.len(), pins.len(), "{} found", found.len());
             assert_eq!(found.len(), pins.len());
         }
+    }
+
+    #[test]
+    fn an_outer_ring_of_pins_that_nearly_touch_is_found_at_half_resolution() {
+        // A dome's outer ring: pins foreshortened to half their width
+        // across the ring and 7.5 px apart along it, so that they nearly
+        // touch, below a lattice of round pins, with the detector the
+        // renderer's domes get (a 5 px lobe, at half resolution). There
+        // the ring is a ridge, or too weak a blob: 10 of the 34 were found.
+        let (w, h, pitch) = (320, 240, 11.0);
+        let lattice: Vec<PointPx> = test_fixtures::hex_points(w, h - 60, pitch);
+        let ring: Vec<PointPx> = (0..34)
+            .map(|k| PointPx::new(36.0 + 7.5 * k as f64, 206.0))
+            .collect();
+        let data = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64, (i / w) as f64);
+                let blob = |p: &PointPx, sx: f64, sy: f64| {
+                    200.0
+                        * (-(p.x - x).powi(2) / (2.0 * sx * sx)
+                            - (p.y - y).powi(2) / (2.0 * sy * sy))
+                            .exp()
+                };
+                let lit = lattice
+                    .iter()
+                    .map(|p| blob(p, 2.6, 2.6))
+                    .chain(ring.iter().map(|p| blob(p, 2.4, 1.1)))
+                    .fold(0.0, f64::max);
+                (30.0 + lit).round() as u8
+            })
+            .collect();
+        let frame = GreyFrame::new(w, h, data).unwrap();
+        let params = MarkerParams {
+            polarity: Polarity::Bright,
+            lobe_px: Some(5),
+            binned: Some(true),
+            ..MarkerParams::default()
+        };
+        let mut det = auto_detector(&frame, &params).unwrap();
+        assert_eq!((det.bin, det.lobe_px), (2, 3));
+        // The ring lies where the dome is seen at 56-65 deg from its apex.
+        det.surface = Surface::Dome(crate::surface::Dome {
+            centre: PointPx::new(160.0, 40.0),
+            radius_px: 200.0,
+        });
+        let ring_fs = ring.iter().map(|&p| det.surface.foreshortening(p));
+        assert!(ring_fs.fold(0.0, f64::max) < FINE_MAX_FORESHORTENING);
+        let found = detect(&frame, &det).positions();
+        let on_ring = test_fixtures::match_points(&found, &ring, 1.0);
+        assert_eq!(
+            on_ring.len(),
+            ring.len(),
+            "{} of the ring found",
+            on_ring.len()
+        );
+        let on_lattice = test_fixtures::match_points(&found, &lattice, 1.0);
+        assert_eq!(on_lattice.len() + on_ring.len(), found.len());
     }
 
     #[test]
