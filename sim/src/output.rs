@@ -536,8 +536,10 @@ pub struct Summary {
     /// `failed` when `status` is not `ok`; else `held`, `dropped`,
     /// `released` or `not_grasped`, as `object_at_end`.
     pub outcome: &'static str,
-    /// What became of the object, failed run or not: `held` (still in the
-    /// grasp at the end), `dropped`, `released` or `not_grasped`.
+    /// What became of the object, failed run or not: `held` (both
+    /// fingertips still on it at the end), `dropped`, `released` or
+    /// `not_grasped` (none in the scenario, or the fingers never closed on
+    /// it).
     pub object_at_end: &'static str,
     /// Closing began -> seal decision, s.
     pub time_to_stable_s: Option<f64>,

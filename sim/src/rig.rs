@@ -36,7 +36,9 @@
 //! - `held`: the object was still in the grasp at the end;
 //! - `dropped`: it fell out while the host had not released it;
 //! - `released`: the host released (slip, lost contact, no contact);
-//! - `not_grasped`: no object and no release (only without tactile feedback).
+//! - `not_grasped`: no release, and no object in the grasp at the end:
+//!   none in the scenario (only without tactile feedback), or one the
+//!   fingertips are not both on (the run ended before they closed).
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
@@ -236,7 +238,8 @@ pub enum Outcome {
     Dropped,
     /// The host released.
     Released,
-    /// No object and no release.
+    /// No release, and no object in the grasp at the end (none in the
+    /// scenario, or the fingertips are not both on it).
     NotGrasped,
 }
 
@@ -935,12 +938,16 @@ fn build_report(
         .find(|(_, _, r)| *r == "release")
         .map(|(t, _, _)| *t);
     let dropped_ms = plant.dropped_at_ms();
+    // Held: both fingertips still on the object at the end (an object the
+    // fingers never closed on stays on the table, in no grasp).
+    let gripped = plant.state().contacts.iter().all(Option::is_some);
     let outcome = match (scenario.object().is_some(), released_ms, dropped_ms) {
         (false, Some(_), _) => Outcome::Released,
         (false, None, _) => Outcome::NotGrasped,
         (true, Some(r), d) if d.is_none_or(|d| r <= d) => Outcome::Released,
         (true, _, Some(_)) => Outcome::Dropped,
-        (true, _, None) => Outcome::Held,
+        (true, _, None) if gripped => Outcome::Held,
+        (true, _, None) => Outcome::NotGrasped,
     };
     let closing_ms = c
         .commands

@@ -103,6 +103,20 @@ fn a_board_reset_mid_grasp_ends_the_run_within_the_silence_bound() {
 }
 
 #[test]
+fn a_run_that_ends_before_the_fingers_close_grasped_nothing() {
+    // The board resets while the tanks still charge: the run ends before
+    // closing began, with the object on the table between open fingers.
+    let r = run(vec![Injection::McuResetAt { at_ms: 300 }]);
+    assert!(
+        matches!(r.loop_result, Err(LoopError::McuReset { .. })),
+        "{:?}",
+        r.loop_result
+    );
+    assert_eq!(r.time_to_stable_s, None);
+    assert_eq!(r.outcome, Outcome::NotGrasped);
+}
+
+#[test]
 fn late_telemetry_is_not_taken_for_a_reset() {
     // The MCU stops for 300 ms (longer than MCU_SILENCE_MS, shorter than
     // its own host-silence deadline) and then catches up: the loop's hello
