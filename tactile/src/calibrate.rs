@@ -87,6 +87,11 @@ pub struct Calibration {
     /// are searched for there whenever following is checked by a search
     /// ([`rest_gaps`]).
     pub gaps_px: Vec<PointPx>,
+    /// The rest markers' rivals for following
+    /// ([`markers::Rivals::new`] of `rest_markers` at
+    /// [`crate::pipeline::FOLLOW_REACH_PITCH`] pitches; computed again
+    /// whenever `rest_markers` change).
+    pub rivals: markers::Rivals,
 }
 
 impl Calibration {
@@ -139,6 +144,7 @@ impl Calibration {
             radii_px: &self.centroid_radii_px,
             contrast: &self.rest_contrast,
             gaps_px: &self.gaps_px,
+            rivals: Some(&self.rivals),
         }
     }
 
@@ -202,6 +208,7 @@ pub fn calibrate_mapped(
         });
     }
     (cal.rest_markers, cal.centroid_radii_px) = settled.into_iter().unzip();
+    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px);
     (cal.rest_density, cal.mask, cal.rest_median_per_mm2) =
         reference(&cal.rest_markers, &cal.density, &cal.detector);
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
@@ -526,6 +533,7 @@ fn finish(
     };
     let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
+    let rivals = rivals(&rest_markers, pitch_px);
     Ok(Calibration {
         width: w,
         height: h,
@@ -540,7 +548,13 @@ fn finish(
         centroid_radii_px,
         rest_contrast: Vec::new(),
         gaps_px: Vec::new(),
+        rivals,
     })
+}
+
+/// The rivals of `rest_markers` for the pipeline's follow reach.
+fn rivals(rest_markers: &[PointPx], pitch_px: f64) -> markers::Rivals {
+    markers::Rivals::new(rest_markers, crate::pipeline::FOLLOW_REACH_PITCH * pitch_px)
 }
 
 /// The rim band of an automatic area (`detector.area`) out to `outer`: where
