@@ -442,16 +442,14 @@ pub fn follow(
 ) -> Option<Markers> {
     let frame = &*positive(frame, det.dark);
     let max_lost = (FOLLOW_MAX_LOST * near.len() as f64).floor() as usize;
-    let list = follow_each(
-        frame,
-        det,
-        near,
+    let rest = Reference {
+        at: near,
         radii_px,
-        Some(contrast),
-        reach_px,
-        max_lost,
-        None,
-    )?;
+        contrast,
+        gaps_px: &[],
+        rivals: None,
+    };
+    let list = follow_each(frame, det, &rest, true, reach_px, max_lost)?;
     Some(Markers {
         list: list.into_iter().flatten().collect(),
     })
@@ -471,7 +469,14 @@ pub fn follow_all(
     reach_px: f64,
 ) -> Vec<Option<Marker>> {
     let frame = &*positive(frame, det.dark);
-    follow_each(frame, det, near, radii_px, None, reach_px, usize::MAX, None)
+    let rest = Reference {
+        at: near,
+        radii_px,
+        contrast: &[],
+        gaps_px: &[],
+        rivals: None,
+    };
+    follow_each(frame, det, &rest, false, reach_px, usize::MAX)
         .unwrap_or_else(|| vec![None; near.len()])
 }
 
@@ -600,17 +605,9 @@ pub fn follow_or_search(
             list: detect_in(positive, det, window, None),
         }
     };
-    let Some(found) = follow_each(
-        positive,
-        det,
-        near,
-        rest.radii_px,
-        Some(rest.contrast),
-        reach_px,
-        max_lost,
-        rest.rivals,
-    )
-    .filter(|found| !noise_like(positive, det, found, rest.radii_px)) else {
+    let Some(found) = follow_each(positive, det, rest, true, reach_px, max_lost)
+        .filter(|found| !noise_like(positive, det, found, rest.radii_px))
+    else {
         return (full(), Search::Full);
     };
     let lost = found.iter().filter(|f| f.is_none()).count();
@@ -953,22 +950,22 @@ fn follow_one(
     hit
 }
 
-/// Follows each of `near` ([`follow`]; each with its centroid radius from
-/// `radii_px`, or the detector's past its end, and its rest contrast from
-/// `contrast`, or 1 past its end; no fading test with `None`): per marker,
-/// the marker or
+/// Follows each of `rest.at` ([`follow`]; each with its centroid radius
+/// from `rest.radii_px`, or the detector's past its end, and, with `fade`,
+/// its rest contrast from `rest.contrast`, or 1 past its end; no fading
+/// test without): per marker, the marker or
 /// `None` when it is lost (moved beyond `reach_px`, faded, or the second of
 /// two that ran into one blob). `None` once more than `max_lost` are lost.
 fn follow_each(
     frame: &GreyFrame,
     det: &Detector,
-    near: &[PointPx],
-    radii_px: &[f64],
-    contrast: Option<&[f32]>,
+    rest: &Reference,
+    fade: bool,
     reach_px: f64,
     max_lost: usize,
-    rivals: Option<&Rivals>,
 ) -> Option<Vec<Option<Marker>>> {
+    let (near, radii_px, rivals) = (rest.at, rest.radii_px, rest.rivals);
+    let contrast = fade.then_some(rest.contrast);
     let mut lost = 0usize;
     let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
     for (k, &p) in near.iter().enumerate() {
@@ -2485,15 +2482,20 @@ mod tests {
         let rivals = Rivals::new(&near, reach);
         assert!(rivals.covers(near.len(), reach) && !rivals.covers(near.len(), 2.0 * reach));
         let follow = |rivals| {
+            let rest_ref = Reference {
+                at: &near,
+                radii_px: &[],
+                contrast: &[],
+                gaps_px: &[],
+                rivals,
+            };
             follow_each(
                 &rest.image,
                 &cal.detector,
-                &near,
-                &[],
-                None,
+                &rest_ref,
+                false,
                 reach,
                 usize::MAX,
-                rivals,
             )
             .unwrap()
         };
