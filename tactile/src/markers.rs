@@ -2458,12 +2458,12 @@ mod tests {
         }
     }
 
-    #[test]
-    fn rivals_find_the_markers_that_ran_into_one_blob_as_the_grid_does() {
-        // Every rest marker, plus a second rest place 1.5 px beside every
-        // tenth one (two places that following brings into one blob): the
-        // second of each pair is lost, with the calibration's rivals as with
-        // the frame-sized grid, and nothing else differs.
+    /// A nominal synthetic sensor, its rest frame and its calibration.
+    fn nominal_rest() -> (
+        crate::synth::SensorSpec,
+        crate::synth::SynthFrame,
+        crate::calibrate::Calibration,
+    ) {
         let sensor = Category::Nominal.sensor(640, 480, 3);
         let rest = rest_frame(&sensor, 4);
         let cal = crate::calibrate::calibrate(
@@ -2471,6 +2471,16 @@ mod tests {
             &crate::params::Params::default(),
         )
         .unwrap();
+        (sensor, rest, cal)
+    }
+
+    #[test]
+    fn rivals_find_the_markers_that_ran_into_one_blob_as_the_grid_does() {
+        // Every rest marker, plus a second rest place 1.5 px beside every
+        // tenth one (two places that following brings into one blob): the
+        // second of each pair is lost, with the calibration's rivals as with
+        // the frame-sized grid, and nothing else differs.
+        let (_, rest, cal) = nominal_rest();
         let reach = crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px;
         let mut near = cal.rest_markers.clone();
         let doubles: Vec<PointPx> = near
@@ -2510,13 +2520,7 @@ mod tests {
     #[test]
     fn a_press_that_loses_markers_is_searched_around_them_or_in_the_whole_frame() {
         use crate::synth::{render, Press, Scene};
-        let sensor = Category::Nominal.sensor(640, 480, 3);
-        let rest = rest_frame(&sensor, 4);
-        let cal = crate::calibrate::calibrate(
-            std::slice::from_ref(&rest.image),
-            &crate::params::Params::default(),
-        )
-        .unwrap();
+        let (sensor, rest, cal) = nominal_rest();
         let reach = 0.3 * cal.pitch_px;
         let local = Some(cal.pitch_px);
         let run = |frame: &GreyFrame, local| {
