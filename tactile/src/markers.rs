@@ -526,8 +526,9 @@ pub struct Reference<'a> {
 /// `2 reach + DUPLICATE_PX` of each other, for a follow reach up to
 /// `reach_px`. Computed once at calibration: a frame's test for two
 /// followed markers in one blob then looks at those few (none, on most
-/// lattices) instead of clearing and filling a frame-sized grid (the grid
-/// was about 7 % of a contact frame's time on the other renderer's domes).
+/// lattices) instead of clearing and filling a frame-sized grid (whose
+/// claims took 0.02-0.03 ms of a frame on the other renderer's domes,
+/// BENCHMARKS.md, session 16).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Rivals {
     /// The largest follow reach the lists hold for, px.
