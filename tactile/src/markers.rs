@@ -541,12 +541,7 @@ impl Rivals {
     /// The rivals among `near` for a follow reach of `reach_px`.
     pub fn new(near: &[PointPx], reach_px: f64) -> Self {
         let within_px = 2.0 * reach_px.max(0.0) + DUPLICATE_PX;
-        let (mut w, mut h) = (1.0f64, 1.0f64);
-        for p in near.iter().filter(|p| p.is_finite()) {
-            w = w.max(p.x + 1.0);
-            h = h.max(p.y + 1.0);
-        }
-        let index = PointIndex::new(near, w as usize, h as usize, within_px);
+        let index = PointIndex::spanning(near, within_px);
         let earlier = (0..near.len())
             .map(|k| {
                 let mut e: Vec<u32> = index
@@ -1066,12 +1061,7 @@ fn follow_each(
 /// frame's blur and light.
 pub fn centroid_radii(points: &[PointPx], radius_px: f64) -> Vec<f64> {
     let reach = window_reach_px(radius_px) as f64;
-    let (mut w, mut h) = (1.0f64, 1.0f64);
-    for p in points.iter().filter(|p| p.is_finite()) {
-        w = w.max(p.x + 1.0);
-        h = h.max(p.y + 1.0);
-    }
-    let index = crate::tracking::PointIndex::new(points, w as usize, h as usize, 2.0 * reach);
+    let index = PointIndex::spanning(points, 2.0 * reach);
     (0..points.len())
         .map(|n| {
             let nearest = index

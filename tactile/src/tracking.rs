@@ -91,6 +91,18 @@ impl PointIndex {
         }
     }
 
+    /// [`PointIndex::new`] over the box from the origin to the farthest of
+    /// `points` (a point set with no frame of its own, such as the rest
+    /// markers).
+    pub fn spanning(points: &[PointPx], cell_px: f64) -> Self {
+        let (mut w, mut h) = (1.0f64, 1.0f64);
+        for p in points.iter().filter(|p| p.is_finite()) {
+            w = w.max(p.x + 1.0);
+            h = h.max(p.y + 1.0);
+        }
+        Self::new(points, w as usize, h as usize, cell_px)
+    }
+
     /// Index and distance of the point nearest to `q` within `radius_px`
     /// (`radius_px` must not exceed the cell size).
     pub fn nearest(&self, points: &[PointPx], q: PointPx, radius_px: f64) -> Option<(usize, f64)> {
