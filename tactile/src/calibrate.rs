@@ -702,19 +702,14 @@ fn reference(
             *m &= area.contains(p);
         }
     }
-    let mut inside: Vec<f32> = rest_density
+    let inside: Vec<f32> = rest_density
         .values_per_mm2
         .iter()
         .zip(&mask)
         .filter(|&(v, &m)| m && v.is_finite())
         .map(|(&v, _)| v)
         .collect();
-    let median = if inside.is_empty() {
-        0.0
-    } else {
-        let k = inside.len() / 2;
-        *inside.select_nth_unstable_by(k, f32::total_cmp).1
-    };
+    let median = markers::percentile(inside, 0.5);
     (rest_density, mask, median)
 }
 
