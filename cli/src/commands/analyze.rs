@@ -459,33 +459,39 @@ fn write_field(
     rest: &[PointPx],
     displacement: &[Option<PointPx>],
 ) -> anyhow::Result<()> {
-    let err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
-    let mut f = csv::Writer::from_path(path).map_err(err)?;
-    f.write_record(["rest_x", "rest_y", "x", "y"])
-        .map_err(err)?;
-    let xy = |p: PointPx| {
-        let p = prepared.to_input(p);
-        [format!("{:.3}", p.x), format!("{:.3}", p.y)]
-    };
-    for (&r, u) in rest.iter().zip(displacement) {
-        let [rx, ry] = xy(r);
+    let rows = rest.iter().zip(displacement).map(|(&r, u)| {
+        let [rx, ry] = input_xy(prepared, r);
         let [x, y] = u.map_or([String::new(), String::new()], |u| {
-            xy(PointPx::new(r.x + u.x, r.y + u.y))
+            input_xy(prepared, PointPx::new(r.x + u.x, r.y + u.y))
         });
-        f.write_record([rx, ry, x, y]).map_err(err)?;
-    }
-    f.flush()
-        .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
+        [rx, ry, x, y]
+    });
+    write_csv(path, ["rest_x", "rest_y", "x", "y"], rows)
 }
 
+/// One row per marker: its centre, input px.
 fn write_markers(path: &Path, prepared: &Prepared, markers: &[PointPx]) -> anyhow::Result<()> {
+    let rows = markers.iter().map(|&m| input_xy(prepared, m));
+    write_csv(path, ["x", "y"], rows)
+}
+
+/// Working-frame point `p` in input px, as the per-frame CSVs write it.
+fn input_xy(prepared: &Prepared, p: PointPx) -> [String; 2] {
+    let p = prepared.to_input(p);
+    [format!("{:.3}", p.x), format!("{:.3}", p.y)]
+}
+
+/// A CSV of `header` and `rows` at `path`.
+fn write_csv<const N: usize>(
+    path: &Path,
+    header: [&str; N],
+    rows: impl Iterator<Item = [String; N]>,
+) -> anyhow::Result<()> {
     let err = |e: csv::Error| anyhow!("cannot write {}: {e}", path.display());
     let mut f = csv::Writer::from_path(path).map_err(err)?;
-    f.write_record(["x", "y"]).map_err(err)?;
-    for m in markers {
-        let p = prepared.to_input(*m);
-        f.write_record([format!("{:.3}", p.x), format!("{:.3}", p.y)])
-            .map_err(err)?;
+    f.write_record(header).map_err(err)?;
+    for row in rows {
+        f.write_record(row).map_err(err)?;
     }
     f.flush()
         .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))
