@@ -73,7 +73,10 @@ class Observation:
         """Detected marker centres, (N, 2), input px."""
     @property
     def displacements_px(self) -> npt.NDArray[np.float64]:
-        """Per rest marker (``Sensor.rest_markers_px`` order), (dx, dy), (M, 2), input px; NaN where lost."""
+        """Per rest marker (``Sensor.rest_markers_px`` order), (dx, dy), (M, 2), input px; NaN where lost.
+
+        In a frame blurrier than the rest, the blur's own shift of each centroid is taken off, and markers
+        it shifts by 1 px or more are NaN (a dome's crowded outer rings)."""
     @property
     def n_markers(self) -> int:
         """Number of detected markers."""

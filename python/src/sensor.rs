@@ -580,6 +580,8 @@ pub struct Observation {
     markers_px: Py<PyArray2<f64>>,
     /// Per rest marker (`Sensor.rest_markers_px` order), its displacement
     /// (dx, dy), (M, 2) float64, input px; NaN where the marker was lost.
+    /// In a frame blurrier than the rest, the blur's own shift of each
+    /// centroid is taken off, and markers it shifts by 1 px or more are NaN.
     #[pyo3(get)]
     displacements_px: Py<PyArray2<f64>>,
     /// Number of detected markers.

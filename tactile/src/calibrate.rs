@@ -92,6 +92,10 @@ pub struct Calibration {
     /// [`crate::pipeline::FOLLOW_REACH_PITCH`] pitches; computed again
     /// whenever `rest_markers` change).
     pub rivals: markers::Rivals,
+    /// Where blur puts the rest markers' centroids
+    /// ([`markers::BlurLevels::measure`] on the first rest frame; computed
+    /// again whenever `rest_markers` change).
+    pub blur: markers::BlurLevels,
 }
 
 impl Calibration {
@@ -213,6 +217,7 @@ pub fn calibrate_mapped(
         reference(&cal.rest_markers, &cal.density, &cal.detector);
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
+    cal.blur = blur_levels(first, &cal);
     Ok(cal)
 }
 
@@ -463,6 +468,7 @@ pub fn calibrate_from_frames(
         .collect();
     let mut cal = finish(&median, detector, stable, given, params, map)?;
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
+    cal.blur = blur_levels(&median, &cal);
     Ok(cal)
 }
 
@@ -549,12 +555,25 @@ fn finish(
         rest_contrast: Vec::new(),
         gaps_px: Vec::new(),
         rivals,
+        blur: markers::BlurLevels::default(),
     })
 }
 
 /// The rivals of `rest_markers` for the pipeline's follow reach.
 fn rivals(rest_markers: &[PointPx], pitch_px: f64) -> markers::Rivals {
     markers::Rivals::new(rest_markers, crate::pipeline::FOLLOW_REACH_PITCH * pitch_px)
+}
+
+/// Where blur puts `cal`'s rest markers on `rest`: followed within half a
+/// pitch, in their own centroid windows.
+fn blur_levels(rest: &GreyFrame, cal: &Calibration) -> markers::BlurLevels {
+    markers::BlurLevels::measure(
+        rest,
+        &cal.detector,
+        &cal.rest_markers,
+        &cal.centroid_radii_px,
+        0.5 * cal.pitch_px,
+    )
 }
 
 /// The rim band of an automatic area (`detector.area`) out to `outer`: where

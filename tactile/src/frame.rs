@@ -108,12 +108,66 @@ impl GreyFrame {
         }
     }
 
+    /// This frame under a Gaussian blur of `sigma_px` ([`gaussian_blur`]),
+    /// rounded to grey levels; `sigma_px <= 0` copies it.
+    pub fn blurred(&self, sigma_px: f64) -> GreyFrame {
+        let mut v: Vec<f32> = self.data.iter().map(|&p| f32::from(p)).collect();
+        gaussian_blur(&mut v, self.width, self.height, sigma_px);
+        GreyFrame {
+            width: self.width,
+            height: self.height,
+            // In 0..=255: a blur is a weighted mean.
+            data: v
+                .iter()
+                .map(|&p| p.round().clamp(0.0, 255.0) as u8)
+                .collect(),
+        }
+    }
+
     /// Pixel at `(x, y)`, 0 outside the image.
     pub fn get(&self, x: i64, y: i64) -> u8 {
         if x < 0 || y < 0 || x >= self.width as i64 || y >= self.height as i64 {
             0
         } else {
             self.data[y as usize * self.width + x as usize]
+        }
+    }
+}
+
+/// Separable Gaussian blur of a `width x height` row-major image in place
+/// (kernel truncated at 3 sigma, edges clamped); `sigma_px <= 0` does
+/// nothing.
+pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f64) {
+    if sigma_px <= 0.0 || width == 0 || height == 0 {
+        return;
+    }
+    let radius = (3.0 * sigma_px).ceil() as i64;
+    let mut kernel: Vec<f32> = (-radius..=radius)
+        .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
+        .collect();
+    let sum: f32 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    let mut tmp = vec![0f32; data.len()];
+    let (wi, hi) = (width as i64, height as i64);
+    for y in 0..height {
+        let row = &data[y * width..(y + 1) * width];
+        for x in 0..wi {
+            let mut acc = 0f32;
+            for (k, &kv) in kernel.iter().enumerate() {
+                let xx = (x + k as i64 - radius).clamp(0, wi - 1) as usize;
+                acc += kv * row[xx];
+            }
+            tmp[y * width + x as usize] = acc;
+        }
+    }
+    for y in 0..hi {
+        for x in 0..width {
+            let mut acc = 0f32;
+            for (k, &kv) in kernel.iter().enumerate() {
+                let yy = (y + k as i64 - radius).clamp(0, hi - 1) as usize;
+                acc += kv * tmp[yy * width + x];
+            }
+            data[y as usize * width + x] = acc;
         }
     }
 }

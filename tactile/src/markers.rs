@@ -562,6 +562,233 @@ impl Rivals {
     }
 }
 
+/// The added blur (Gaussian sigma, px) of the levels the rest is measured
+/// under again ([`BlurLevels`]): frames up to 3 px blurrier than the rest.
+pub const BLUR_LEVELS_PX: [f64; 6] = [0.5, 1.0, 1.5, 2.0, 2.5, 3.0];
+/// [`BlurLevels::fit`] tries the added blurs from 0 to the last level in
+/// steps of this, px.
+pub const BLUR_FIT_STEP_PX: f64 = 0.25;
+/// [`BlurLevels::fit`] takes a blur only where it explains the gauges'
+/// displacements: their median squared distance from its shifts is below
+/// this fraction of their median squared displacement, and their median
+/// distance from its shifts at most [`BLUR_MAX_RESIDUAL_PX`]. Measured
+/// (BENCHMARKS.md, session 17): on the other renderer's blurred frames
+/// (PSF 1.8-2.8 px against 1 px at rest) the fraction was 0.002-0.34 and
+/// the distance 0.03-0.56 px; on its nominal frames (PSF 0.9-1.4 px) the
+/// fraction was 0.65-1.0 (left as they are); the real TacTip taps (rest
+/// from the frames) had 18 of 200 frames with a fraction of 0.15-0.99 and
+/// a distance of 1.5-4.3 px: a deep tap that moves most gauges also fits
+/// some blur better than none.
+pub const BLUR_MIN_GAIN: f64 = 0.5;
+/// See [`BLUR_MIN_GAIN`], px.
+pub const BLUR_MAX_RESIDUAL_PX: f64 = 1.0;
+/// A marker that the frame's blur moves this far or further
+/// ([`BlurLevels::shifts_at`]) is left out of the frame's displacement
+/// field, px: where blur makes the outer ring's blobs run together, how
+/// far it moves each centroid changes with the frame's noise. On the other
+/// renderer's dome, still frames with a PSF of 2.5-3 px (1 px at rest) kept
+/// outliers of 2.4-4.2 px after the shifts were taken off, and 3 of 8 still
+/// frames at 2.6-2.7 px had a false contact from them (BENCHMARKS.md,
+/// session 17).
+pub const BLUR_UNSURE_SHIFT_PX: f64 = 1.0;
+/// [`BlurLevels::fit`] fits no blur when the gauges moved less than this
+/// (median), px: no blur that moves them less matters.
+pub const BLUR_MIN_MOVE_PX: f64 = 0.25;
+/// A rest marker is a blur gauge when the blurriest level moves its
+/// centroid at least this far, px.
+pub const BLUR_GAUGE_MIN_SHIFT_PX: f64 = 0.5;
+/// Most blur gauges: the rest markers the blurriest level moves furthest.
+pub const BLUR_GAUGES: usize = 64;
+/// With fewer gauges than this the lattice's centroids do not move with
+/// blur: no level is fitted.
+pub const BLUR_MIN_GAUGES: usize = 8;
+
+/// Where blur puts the rest markers' centroids. A centroid window holds
+/// part of a close neighbour's blob once the frame is blurrier than the
+/// rest, so on a dome's crowded outer rings a still marker's centroid moves
+/// with the blur alone: on the other renderer's dome, 0.5-1.7 px (median)
+/// and up to 5.7 px for the outermost ring 2-2.5 px blurrier than the rest
+/// (BENCHMARKS.md, session 17), all read as displacement. Calibration follows
+/// the rest markers on the rest frame blurred by each of
+/// [`BLUR_LEVELS_PX`]; a frame's blur is the level whose shifts best explain
+/// the gauges' displacements ([`BlurLevels::fit`]), and its shifts are taken
+/// off the frame's displacements.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BlurLevels {
+    /// Per level of [`BLUR_LEVELS_PX`] (all, or none), per rest marker:
+    /// where following finds it on the blurred rest frame, from its rest
+    /// place, px (zero where following loses it).
+    pub shift_px: Vec<Vec<PointPx>>,
+    /// The gauges ([`BLUR_GAUGES`] at most, each moved at least
+    /// [`BLUR_GAUGE_MIN_SHIFT_PX`] by the blurriest level), by rest index;
+    /// empty below [`BLUR_MIN_GAUGES`].
+    pub gauges: Vec<usize>,
+    /// Per rest marker, its place in `gauges` (`u8::MAX`: none).
+    pub slot: Vec<u8>,
+    /// Per added blur [`BLUR_FIT_STEP_PX`] apart from 0, per gauge, its
+    /// shift ([`BlurLevels::shifts_at`]).
+    pub gauge_shift_px: Vec<Vec<PointPx>>,
+}
+
+impl BlurLevels {
+    /// Follows the rest markers `at` (each in its window of `radii_px`, or
+    /// the detector's past its end, within `reach_px`) on `rest` blurred by
+    /// each level.
+    pub fn measure(
+        rest: &GreyFrame,
+        det: &Detector,
+        at: &[PointPx],
+        radii_px: &[f64],
+        reach_px: f64,
+    ) -> Self {
+        let rest = positive(rest, det.dark);
+        let shift_px: Vec<Vec<PointPx>> = BLUR_LEVELS_PX
+            .iter()
+            .map(|&sigma_px| {
+                let blurred = rest.blurred(sigma_px);
+                at.iter()
+                    .enumerate()
+                    .map(|(k, &p)| {
+                        let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
+                        follow_one(&blurred, p, radius_px, det.min_contrast, reach_px)
+                            .map_or(PointPx::default(), |(c, _, _)| {
+                                PointPx::new(c.x - p.x, c.y - p.y)
+                            })
+                    })
+                    .collect()
+            })
+            .collect();
+        Self::from_shifts(shift_px)
+    }
+
+    /// The levels of `shift_px` (per level of [`BLUR_LEVELS_PX`], per rest
+    /// marker, its shift), with their gauges.
+    pub fn from_shifts(shift_px: Vec<Vec<PointPx>>) -> Self {
+        let n = shift_px.first().map_or(0, Vec::len);
+        let moved = |k: usize| {
+            shift_px
+                .last()
+                .and_then(|s| s.get(k))
+                .map_or(0.0, |s| s.x.hypot(s.y))
+        };
+        let mut gauges: Vec<usize> = (0..n)
+            .filter(|&k| moved(k) >= BLUR_GAUGE_MIN_SHIFT_PX)
+            .collect();
+        gauges.sort_by(|&a, &b| moved(b).total_cmp(&moved(a)).then(a.cmp(&b)));
+        gauges.truncate(BLUR_GAUGES);
+        if gauges.len() < BLUR_MIN_GAUGES {
+            gauges.clear();
+        }
+        let mut slot = vec![u8::MAX; n];
+        for (g, &k) in gauges.iter().enumerate() {
+            // BLUR_GAUGES < u8::MAX.
+            slot[k] = g as u8;
+        }
+        let mut levels = Self {
+            shift_px,
+            gauges,
+            slot,
+            gauge_shift_px: Vec::new(),
+        };
+        let last = BLUR_LEVELS_PX[BLUR_LEVELS_PX.len() - 1];
+        levels.gauge_shift_px = (0..=(last / BLUR_FIT_STEP_PX).round() as usize)
+            .map(|i| {
+                let shift = levels.shifts_at(i as f64 * BLUR_FIT_STEP_PX);
+                levels.gauges.iter().map(|&k| shift(k)).collect()
+            })
+            .collect();
+        levels
+    }
+
+    /// The shift of each rest marker (by index) at an added blur of
+    /// `sigma_px`: linear between the levels, zero at no added blur, the
+    /// last level's beyond it.
+    pub fn shifts_at(&self, sigma_px: f64) -> impl Fn(usize) -> PointPx + '_ {
+        let levels = &BLUR_LEVELS_PX[..BLUR_LEVELS_PX.len().min(self.shift_px.len())];
+        // The levels either side (`None`: no added blur, or none beyond)
+        // and the fraction of the way from the lower.
+        let (lo, hi, t) = match levels.iter().position(|&s| sigma_px <= s) {
+            Some(0) => (None, Some(0), sigma_px / levels[0]),
+            Some(j) => (
+                Some(j - 1),
+                Some(j),
+                (sigma_px - levels[j - 1]) / (levels[j] - levels[j - 1]),
+            ),
+            None => (levels.len().checked_sub(1), None, 0.0),
+        };
+        let t = t.clamp(0.0, 1.0);
+        move |k| {
+            let at = |l: Option<usize>| {
+                l.and_then(|l| self.shift_px[l].get(k).copied())
+                    .unwrap_or_default()
+            };
+            let (a, b) = (at(lo), at(hi));
+            PointPx::new(a.x + t * (b.x - a.x), a.y + t * (b.y - a.y))
+        }
+    }
+
+    /// The added blur (px) whose shifts best explain the gauges'
+    /// displacements in `markers` (the followed ones of `rest`'s markers):
+    /// the least median squared distance between the two, trying every
+    /// [`BLUR_FIT_STEP_PX`] from 0 to the last level. `None` when the rest's markers do not move with blur
+    /// (no gauges, or levels made for another rest), when fewer than half
+    /// the gauges were followed, when they hardly moved
+    /// ([`BLUR_MIN_MOVE_PX`]), or when no added blur fits best, or not well
+    /// enough ([`BLUR_MIN_GAIN`]). A contact moves a few gauges; the
+    /// median ignores them.
+    pub fn fit(&self, rest: &[PointPx], markers: &[Marker]) -> Option<f64> {
+        if self.gauges.is_empty() || self.slot.len() != rest.len() {
+            return None;
+        }
+        let mut seen = vec![None; self.gauges.len()];
+        for m in markers {
+            let Some(k) = m.followed_from else { continue };
+            if let (Some(&slot), Some(r)) = (self.slot.get(k), rest.get(k)) {
+                if let Some(s) = seen.get_mut(slot as usize) {
+                    *s = Some(PointPx::new(m.pos.x - r.x, m.pos.y - r.y));
+                }
+            }
+        }
+        let seen: Vec<(usize, PointPx)> = seen
+            .into_iter()
+            .enumerate()
+            .filter_map(|(g, u)| Some((g, u?)))
+            .filter(|(_, u)| u.is_finite())
+            .collect();
+        if 2 * seen.len() < self.gauges.len() {
+            return None;
+        }
+        let mut d2 = Vec::with_capacity(seen.len());
+        let (mut best, mut best_cost, mut sharp_cost) = (0, f64::INFINITY, f64::INFINITY);
+        for (step, shifts) in self.gauge_shift_px.iter().enumerate() {
+            d2.clear();
+            d2.extend(
+                seen.iter()
+                    .map(|&(g, u)| (u.x - shifts[g].x).powi(2) + (u.y - shifts[g].y).powi(2)),
+            );
+            let mid = d2.len() / 2;
+            let cost = *d2.select_nth_unstable_by(mid, f64::total_cmp).1;
+            // Ties go to the lesser blur: a frame as sharp as the rest is
+            // left as it is.
+            if step == 0 {
+                // Gauges that barely moved: whatever blur there is, it is
+                // too little to matter (most frames stop here).
+                if cost < BLUR_MIN_MOVE_PX * BLUR_MIN_MOVE_PX {
+                    return None;
+                }
+                sharp_cost = cost;
+            }
+            if cost < best_cost {
+                (best, best_cost) = (step, cost);
+            }
+        }
+        (best > 0
+            && best_cost < BLUR_MIN_GAIN * sharp_cost
+            && best_cost <= BLUR_MAX_RESIDUAL_PX * BLUR_MAX_RESIDUAL_PX)
+            .then_some(best as f64 * BLUR_FIT_STEP_PX)
+    }
+}
+
 /// The markers of a frame: followed from the rest markers `rest.at`
 /// ([`follow`]). With `local_pitch_px`, the markers following loses (a
 /// contact moved, merged or hid them; at most [`LOCAL_MAX_LOST`] of them)
@@ -2289,6 +2516,87 @@ mod tests {
             assert_eq!(matched.len(), pins.len(), "{} found", found.len());
             assert_eq!(found.len(), pins.len());
         }
+    }
+
+    #[test]
+    fn blur_is_fitted_only_where_it_explains_the_gauges() {
+        // 24 markers on a ring that blur pushes outwards, 0.6 px per px of
+        // added blur, and 24 inside that it leaves alone.
+        let n = 24;
+        let dir = |k: usize| {
+            let a = std::f64::consts::TAU * (k % n) as f64 / n as f64;
+            (a.cos(), a.sin())
+        };
+        let rest: Vec<PointPx> = (0..2 * n)
+            .map(|k| {
+                let r = if k < n { 100.0 } else { 50.0 };
+                PointPx::new(200.0 + r * dir(k).0, 200.0 + r * dir(k).1)
+            })
+            .collect();
+        let levels = BlurLevels::from_shifts(
+            BLUR_LEVELS_PX
+                .iter()
+                .map(|&s| {
+                    (0..2 * n)
+                        .map(|k| {
+                            let m = if k < n { 0.6 * s } else { 0.0 };
+                            PointPx::new(m * dir(k).0, m * dir(k).1)
+                        })
+                        .collect()
+                })
+                .collect(),
+        );
+        assert_eq!(levels.gauges.len(), n);
+        let frame = |u: &dyn Fn(usize) -> (f64, f64)| -> Vec<Marker> {
+            rest.iter()
+                .enumerate()
+                .map(|(k, p)| Marker {
+                    pos: PointPx::new(p.x + u(k).0, p.y + u(k).1),
+                    strength: 100.0,
+                    peak: 0,
+                    rel_level: 1.0,
+                    rel_strength: 1.0,
+                    area_px: 20.0,
+                    followed_from: Some(k),
+                })
+                .collect()
+        };
+        // Sub-pixel noise of 0.05 px, alternating.
+        let noise = |k: usize| if k % 2 == 0 { 0.05 } else { -0.05 };
+        let blurred = |s: f64| {
+            move |k: usize| {
+                let m = if k < n { 0.6 * s } else { 0.0 };
+                (m * dir(k).0 + noise(k), m * dir(k).1 - noise(k))
+            }
+        };
+        let fit = |u: &dyn Fn(usize) -> (f64, f64)| levels.fit(&rest, &frame(u));
+        // 1.75 px blurrier; the same with a press that moved 8 of the ring
+        // 3 px sideways.
+        assert_eq!(fit(&blurred(1.75)), Some(1.75));
+        let pressed = |k: usize| {
+            let u = blurred(1.75)(k);
+            if k < 8 {
+                (u.0 - 3.0 * dir(k).1, u.1 + 3.0 * dir(k).0)
+            } else {
+                u
+            }
+        };
+        assert_eq!(fit(&pressed), Some(1.75));
+        // As sharp as the rest; moved less than BLUR_MIN_MOVE_PX.
+        assert_eq!(fit(&|k| (noise(k), noise(k))), None);
+        assert_eq!(fit(&blurred(0.3)), None);
+        // The whole skin moved 2 px, or turned by 1.5 px: no blur explains
+        // that well enough.
+        assert_eq!(fit(&|k| (2.0 + noise(k), noise(k))), None);
+        assert_eq!(fit(&|k| (-1.5 * dir(k).1, 1.5 * dir(k).0)), None);
+        // Under half the gauges followed.
+        let few: Vec<Marker> = frame(&blurred(1.75))
+            .into_iter()
+            .filter(|m| m.followed_from.is_some_and(|k| k > n / 2))
+            .collect();
+        assert_eq!(levels.fit(&rest, &few), None);
+        // Levels made for another rest.
+        assert_eq!(levels.fit(&rest[1..], &frame(&blurred(1.75))[1..]), None);
     }
 
     #[test]

@@ -90,6 +90,10 @@ pub struct FrameResult {
     pub search: Search,
     /// Density grid cells computed.
     pub density_cells: usize,
+    /// How much blurrier than the rest the frame is, px (added Gaussian
+    /// sigma; [`markers::BlurLevels::fit`]), when its displacements were
+    /// corrected for it.
+    pub blur_px: Option<f64>,
     /// Stage times.
     pub times: StageTimes,
 }
@@ -137,7 +141,38 @@ impl Pipeline {
             (markers::detect(frame, &cal.detector), Search::Full)
         };
         let t1 = Instant::now();
-        let positions = markers.positions();
+        // A frame blurrier than the rest: the centroids its blur alone moved
+        // are put back ([`markers::BlurLevels`]) for the field and the
+        // density (the markers stay where they were found).
+        let blur_px = cal.blur.fit(&cal.rest_markers, &markers.list);
+        let mut positions = markers.positions();
+        // Markers the blur moves far ([`markers::BLUR_UNSURE_SHIFT_PX`]) are
+        // in the density but not in the field: how far it moves each changes
+        // with the frame's noise, and whether two that it runs together are
+        // told apart. The ones lost are taken to be at rest in the density.
+        let mut in_field = vec![true; positions.len()];
+        if let Some(sigma_px) = blur_px {
+            let shift = cal.blur.shifts_at(sigma_px);
+            let unsure =
+                |s: PointPx| s.x * s.x + s.y * s.y >= markers::BLUR_UNSURE_SHIFT_PX.powi(2);
+            let mut found = vec![false; cal.rest_markers.len()];
+            for ((p, m), kept) in positions.iter_mut().zip(&markers.list).zip(&mut in_field) {
+                if let Some(k) = m.followed_from {
+                    let s = shift(k);
+                    (p.x, p.y) = (p.x - s.x, p.y - s.y);
+                    *kept = !unsure(s);
+                    if let Some(f) = found.get_mut(k) {
+                        *f = true;
+                    }
+                }
+            }
+            let hidden = cal.rest_markers.iter().enumerate();
+            positions.extend(
+                hidden
+                    .filter(|&(k, _)| !found[k] && unsure(shift(k)))
+                    .map(|(_, &r)| r),
+            );
+        }
         let field = match search {
             // Each followed marker knows its rest marker, and so does each
             // one searched for around the lost ones: no matching.
@@ -146,7 +181,10 @@ impl Pipeline {
                 markers
                     .list
                     .iter()
-                    .filter_map(|m| Some((m.followed_from?, m.pos))),
+                    .zip(&positions)
+                    .zip(&in_field)
+                    .filter(|(_, &kept)| kept)
+                    .filter_map(|((m, &p), _)| Some((m.followed_from?, p))),
                 cp.move_noise_px,
                 cp.move_noise_sigmas,
             ),
@@ -206,6 +244,7 @@ impl Pipeline {
             blank,
             search,
             density_cells,
+            blur_px,
             times: StageTimes {
                 detect_ms: ms(t0, t1),
                 kde_ms: ms(t1, t2),
@@ -430,6 +469,49 @@ mod tests {
         fn send_sync<T: Send + Sync>() {}
         send_sync::<Pipeline>();
         send_sync::<FrameResult>();
+    }
+
+    #[test]
+    fn a_frame_blurrier_than_the_rest_has_its_blur_taken_off_the_field() {
+        // The dome's outer rings are crowded: in a frame 1.8 px blurrier
+        // than the rest (another rest frame: other noise), their centroid
+        // windows take in their neighbours' blobs.
+        let params = Params::default();
+        let sensor = Category::Dome.sensor(640, 480, 5);
+        let rest = synth::rest_frame(&sensor, 99);
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
+        let blurred = synth::rest_frame(&sensor, 7).image.blurred(1.8);
+        let run = |cal: &Calibration, frame: &GreyFrame| {
+            let r = Pipeline::new(cal.clone(), params.clone())
+                .run(frame)
+                .unwrap();
+            let moves = r
+                .field
+                .displacement
+                .iter()
+                .flatten()
+                .map(|u| u.x.hypot(u.y));
+            (r.blur_px, moves.fold(0.0, f64::max), r.contact)
+        };
+        let (blur_px, with_px, contact) = run(&cal, &blurred);
+        let blind = Calibration {
+            blur: markers::BlurLevels::default(),
+            ..cal.clone()
+        };
+        let (none, without_px, _) = run(&blind, &blurred);
+        assert!(cal.blur.gauges.len() >= markers::BLUR_MIN_GAUGES);
+        assert!(
+            blur_px.is_some_and(|b| (1.25..=2.25).contains(&b)),
+            "{blur_px:?}"
+        );
+        assert_eq!(none, None);
+        assert!(
+            without_px > 1.0 && with_px < 0.5 * without_px,
+            "{with_px} {without_px}"
+        );
+        assert!(contact.is_none());
+        // The rest itself is as sharp as the rest.
+        assert_eq!(run(&cal, &rest.image).0, None);
     }
 
     #[test]

@@ -35,7 +35,7 @@
 //! [`Category::ALL`] the original ones, [`Category::CONDITIONS`] the ones
 //! with the conditions above.
 
-use crate::frame::GreyFrame;
+use crate::frame::{gaussian_blur, GreyFrame};
 use crate::PointPx;
 
 /// Small, fast, seeded PRNG (SplitMix64). Not for cryptography.
@@ -1149,44 +1149,6 @@ fn add_housing(canvas: &mut [f32], w: usize, h: usize, hs: &Housing, out: &mut V
             for x in (cx - reach).max(0)..=(cx + reach).min(w as i64 - 1) {
                 canvas[y as usize * w + x as usize] += st.value(x as f64, y as f64) as f32;
             }
-        }
-    }
-}
-
-/// Separable Gaussian blur of a `width x height` row-major image in place
-/// (kernel truncated at 3 sigma, edges clamped); `sigma_px <= 0` does
-/// nothing.
-pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f64) {
-    if sigma_px <= 0.0 || width == 0 || height == 0 {
-        return;
-    }
-    let radius = (3.0 * sigma_px).ceil() as i64;
-    let mut kernel: Vec<f32> = (-radius..=radius)
-        .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
-        .collect();
-    let sum: f32 = kernel.iter().sum();
-    kernel.iter_mut().for_each(|k| *k /= sum);
-    let mut tmp = vec![0f32; data.len()];
-    let (wi, hi) = (width as i64, height as i64);
-    for y in 0..height {
-        let row = &data[y * width..(y + 1) * width];
-        for x in 0..wi {
-            let mut acc = 0f32;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let xx = (x + k as i64 - radius).clamp(0, wi - 1) as usize;
-                acc += kv * row[xx];
-            }
-            tmp[y * width + x as usize] = acc;
-        }
-    }
-    for y in 0..hi {
-        for x in 0..width {
-            let mut acc = 0f32;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let yy = (y + k as i64 - radius).clamp(0, hi - 1) as usize;
-                acc += kv * tmp[yy * width + x];
-            }
-            data[y as usize * width + x] = acc;
         }
     }
 }

@@ -597,7 +597,7 @@ fn gaussian_blur_keeps_the_sum_and_spreads_by_sigma() {
     let (w, h) = (41, 41);
     let mut img = vec![0f32; w * h];
     img[20 * w + 20] = 1000.0;
-    synth::gaussian_blur(&mut img, w, h, 2.0);
+    dexitac_tactile::frame::gaussian_blur(&mut img, w, h, 2.0);
     let sum: f32 = img.iter().sum();
     assert!((sum - 1000.0).abs() < 0.01, "{sum}");
     let var_x: f64 = (0..h)
@@ -609,7 +609,7 @@ fn gaussian_blur_keeps_the_sum_and_spreads_by_sigma() {
     assert!((img[20 * w + 17] - img[20 * w + 23]).abs() < 1e-4);
     assert!((img[17 * w + 20] - img[20 * w + 17]).abs() < 1e-4);
     let before = img.clone();
-    synth::gaussian_blur(&mut img, w, h, 0.0);
+    dexitac_tactile::frame::gaussian_blur(&mut img, w, h, 0.0);
     assert_eq!(img, before);
 }
 

@@ -52,7 +52,9 @@ pub struct AnalyzeArgs {
     markers_out: Option<PathBuf>,
     /// Write the displacement field of each frame to `DIR/<frame>.csv`: one
     /// row per rest marker, `rest_x,rest_y,x,y` (x, y empty when the marker
-    /// is lost), input px.
+    /// is lost), input px. In a frame blurrier than the rest, x, y have the
+    /// blur's own shift of the centroid taken off, and are empty where that
+    /// shift is 1 px or more.
     #[arg(long, value_name = "DIR")]
     field_out: Option<PathBuf>,
     /// Frames (PNG or JPEG files, or directories of them).
@@ -451,8 +453,8 @@ fn empty_csv_dir(flag: &str, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// One row per rest marker: its rest place and where the frame has it
-/// (empty when lost), input px.
+/// One row per rest marker: its rest place and where the frame's field has
+/// it (empty when lost or left out for blur), input px.
 fn write_field(
     path: &Path,
     prepared: &Prepared,
