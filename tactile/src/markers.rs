@@ -574,7 +574,7 @@ pub const BLUR_FIT_STEP_PX: f64 = 0.25;
 /// distance from its shifts at most [`BLUR_MAX_RESIDUAL_PX`]. Measured
 /// (BENCHMARKS.md, session 17): on the other renderer's blurred frames
 /// (PSF 1.8-2.8 px against 1 px at rest) the fraction was 0.002-0.34 and
-/// the distance 0.03-0.56 px; on its nominal frames (PSF 0.9-1.4 px) the
+/// the distance 0.03-0.56 px; on its nominal frames (PSF 0.9-1.1 px) the
 /// fraction was 0.65-1.0 (left as they are); the real TacTip taps (rest
 /// from the frames) had 18 of 200 frames with a fraction of 0.15-0.99 and
 /// a distance of 1.5-4.3 px: a deep tap that moves most gauges also fits
@@ -728,15 +728,16 @@ impl BlurLevels {
     }
 
     /// The added blur (px) whose shifts best explain the gauges'
-    /// displacements in `markers` (the followed ones of `rest`'s markers):
+    /// displacements in `markers` (the followed ones of `rest`'s markers),
+    /// and the gauges' median distance from its shifts (px):
     /// the least median squared distance between the two, trying every
-    /// [`BLUR_FIT_STEP_PX`] from 0 to the last level. `None` when the rest's markers do not move with blur
-    /// (no gauges, or levels made for another rest), when fewer than half
-    /// the gauges were followed, when they hardly moved
-    /// ([`BLUR_MIN_MOVE_PX`]), or when no added blur fits best, or not well
-    /// enough ([`BLUR_MIN_GAIN`]). A contact moves a few gauges; the
-    /// median ignores them.
-    pub fn fit(&self, rest: &[PointPx], markers: &[Marker]) -> Option<f64> {
+    /// [`BLUR_FIT_STEP_PX`] from 0 to the last level. `None` when the rest's
+    /// markers do not move with blur (no gauges, or levels made for another
+    /// rest), when fewer than half the gauges were followed, when they
+    /// hardly moved ([`BLUR_MIN_MOVE_PX`]), or when no added blur fits best,
+    /// or not well enough ([`BLUR_MIN_GAIN`]). A contact moves a few
+    /// gauges; the median ignores them.
+    pub fn fit(&self, rest: &[PointPx], markers: &[Marker]) -> Option<(f64, f64)> {
         if self.gauges.is_empty() || self.slot.len() != rest.len() {
             return None;
         }
@@ -762,14 +763,12 @@ impl BlurLevels {
         let (mut best, mut best_cost, mut sharp_cost) = (0, f64::INFINITY, f64::INFINITY);
         for (step, shifts) in self.gauge_shift_px.iter().enumerate() {
             d2.clear();
-            d2.extend(
-                seen.iter()
-                    .map(|&(g, u)| (u.x - shifts[g].x).powi(2) + (u.y - shifts[g].y).powi(2)),
-            );
+            d2.extend(seen.iter().map(|&(g, u)| {
+                let s = shifts.get(g).copied().unwrap_or_default();
+                (u.x - s.x).powi(2) + (u.y - s.y).powi(2)
+            }));
             let mid = d2.len() / 2;
             let cost = *d2.select_nth_unstable_by(mid, f64::total_cmp).1;
-            // Ties go to the lesser blur: a frame as sharp as the rest is
-            // left as it is.
             if step == 0 {
                 // Gauges that barely moved: whatever blur there is, it is
                 // too little to matter (most frames stop here).
@@ -778,6 +777,7 @@ impl BlurLevels {
                 }
                 sharp_cost = cost;
             }
+            // Ties go to the lesser blur.
             if cost < best_cost {
                 (best, best_cost) = (step, cost);
             }
@@ -785,7 +785,7 @@ impl BlurLevels {
         (best > 0
             && best_cost < BLUR_MIN_GAIN * sharp_cost
             && best_cost <= BLUR_MAX_RESIDUAL_PX * BLUR_MAX_RESIDUAL_PX)
-            .then_some(best as f64 * BLUR_FIT_STEP_PX)
+            .then_some((best as f64 * BLUR_FIT_STEP_PX, best_cost.sqrt()))
     }
 }
 
@@ -2569,7 +2569,7 @@ mod tests {
                 (m * dir(k).0 + noise(k), m * dir(k).1 - noise(k))
             }
         };
-        let fit = |u: &dyn Fn(usize) -> (f64, f64)| levels.fit(&rest, &frame(u));
+        let fit = |u: &dyn Fn(usize) -> (f64, f64)| levels.fit(&rest, &frame(u)).map(|f| f.0);
         // 1.75 px blurrier; the same with a press that moved 8 of the ring
         // 3 px sideways.
         assert_eq!(fit(&blurred(1.75)), Some(1.75));

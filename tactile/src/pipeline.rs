@@ -144,7 +144,8 @@ impl Pipeline {
         // A frame blurrier than the rest: the centroids its blur alone moved
         // are put back ([`markers::BlurLevels`]) for the field and the
         // density (the markers stay where they were found).
-        let blur_px = cal.blur.fit(&cal.rest_markers, &markers.list);
+        let blur_fit = cal.blur.fit(&cal.rest_markers, &markers.list);
+        let blur_px = blur_fit.map(|f| f.0);
         let mut positions = markers.positions();
         // Markers the blur moves far ([`markers::BLUR_UNSURE_SHIFT_PX`]) are
         // in the density but not in the field: how far it moves each changes
@@ -197,6 +198,21 @@ impl Pipeline {
                 cp.move_noise_px,
                 cp.move_noise_sigmas,
             ),
+        };
+        // The gauges' distance from the blur's shifts is how well the shifts
+        // were taken off: the frame's jitter is at least that (a saturated
+        // frame's blobs run together otherwise than the blurred rest's; at
+        // a lower jitter their residue passed for a press, BENCHMARKS.md,
+        // session 17).
+        let field = match blur_fit {
+            // Rayleigh: the median distance is 1.1774 sigma.
+            Some((_, residual_px)) => tracking::with_jitter_at_least(
+                field,
+                residual_px / 1.1774,
+                cp.move_noise_px,
+                cp.move_noise_sigmas,
+            ),
+            None => field,
         };
         // A frame with under half the rest markers is blank, covered or not
         // a tactile image: no contact rather than a guess.

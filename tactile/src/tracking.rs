@@ -281,6 +281,16 @@ pub fn track_known_adaptive(
     mark_moved_adaptive(field, floor_px, sigmas)
 }
 
+/// `field` with its jitter raised to `jitter_px` when that is more, and its
+/// moved markers marked again as [`track_known_adaptive`] marks them.
+pub fn with_jitter_at_least(mut field: Field, jitter_px: f64, floor_px: f64, sigmas: f64) -> Field {
+    if jitter_px > field.jitter_px {
+        field.jitter_px = jitter_px;
+        mark_moved(&mut field, floor_px.max(sigmas * jitter_px));
+    }
+    field
+}
+
 fn mark_moved_adaptive(mut field: Field, floor_px: f64, sigmas: f64) -> Field {
     field.jitter_px = jitter_sigma_px(&field.displacement);
     // `max` ignores a NaN product (sigmas is validated finite anyway).
@@ -488,6 +498,29 @@ fn line_distance(p: PointPx, n: PointPx, c: PointPx) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_jitter_floor_marks_the_moved_markers_again() {
+        let rest = vec![
+            PointPx::new(10.0, 10.0),
+            PointPx::new(40.0, 10.0),
+            PointPx::new(70.0, 10.0),
+        ];
+        let known = [
+            (0, PointPx::new(10.1, 10.0)),
+            (1, PointPx::new(40.0, 10.9)),
+            (2, PointPx::new(70.0, 12.0)),
+        ];
+        let field = track_known_adaptive(&rest, known, 0.5, 6.0);
+        assert_eq!(field.moved, vec![1, 2]);
+        // A floor below the frame's own jitter changes nothing.
+        let same = with_jitter_at_least(field.clone(), 0.0, 0.5, 6.0);
+        assert_eq!(same, field);
+        // 0.2 px: moved beyond 1.2 px.
+        let raised = with_jitter_at_least(field, 0.2, 0.5, 6.0);
+        assert_eq!((raised.jitter_px, raised.moved_px), (0.2, 6.0 * 0.2));
+        assert_eq!(raised.moved, vec![2]);
+    }
     use crate::synth::Press;
     use crate::test_fixtures;
 
