@@ -109,7 +109,7 @@ impl GreyFrame {
     }
 
     /// This frame under a Gaussian blur of `sigma_px` ([`gaussian_blur`]),
-    /// rounded to grey levels; `sigma_px <= 0` copies it.
+    /// rounded to grey levels; a `sigma_px` that is not positive copies it.
     pub fn blurred(&self, sigma_px: f64) -> GreyFrame {
         let mut v: Vec<f32> = self.data.iter().map(|&p| f32::from(p)).collect();
         gaussian_blur(&mut v, self.width, self.height, sigma_px);
@@ -135,10 +135,10 @@ impl GreyFrame {
 }
 
 /// Separable Gaussian blur of a `width x height` row-major image in place
-/// (kernel truncated at 3 sigma, edges clamped); `sigma_px <= 0` does
-/// nothing.
+/// (kernel truncated at 3 sigma, edges clamped); a `sigma_px` that is not
+/// positive (or NaN) does nothing.
 pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f64) {
-    if sigma_px <= 0.0 || width == 0 || height == 0 {
+    if sigma_px.is_nan() || sigma_px <= 0.0 || width == 0 || height == 0 {
         return;
     }
     let radius = (3.0 * sigma_px).ceil() as i64;

@@ -498,6 +498,8 @@ fn line_distance(p: PointPx, n: PointPx, c: PointPx) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::synth::Press;
+    use crate::test_fixtures;
 
     #[test]
     fn a_jitter_floor_marks_the_moved_markers_again() {
@@ -521,8 +523,6 @@ mod tests {
         assert_eq!((raised.jitter_px, raised.moved_px), (0.2, 6.0 * 0.2));
         assert_eq!(raised.moved, vec![2]);
     }
-    use crate::synth::Press;
-    use crate::test_fixtures;
 
     #[test]
     fn nearest_finds_the_closest_within_radius() {
