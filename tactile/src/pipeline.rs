@@ -213,10 +213,10 @@ impl Pipeline {
         // a lower jitter their residue passed for a press, BENCHMARKS.md,
         // session 17).
         let field = match blur_fit {
-            // Rayleigh: the median distance is 1.1774 sigma.
+            // The residual is a median distance.
             Some((_, residual_px)) => tracking::with_jitter_at_least(
                 field,
-                residual_px / 1.1774,
+                tracking::rayleigh_sigma_px(residual_px * residual_px, 0.5),
                 cp.move_noise_px,
                 cp.move_noise_sigmas,
             ),

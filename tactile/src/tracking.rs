@@ -225,7 +225,14 @@ pub fn jitter_sigma_px(displacement: &[Option<PointPx>]) -> f64 {
     }
     let k = ((sq.len() as f64 * JITTER_QUANTILE) as usize).min(sq.len() - 1);
     let q = *sq.select_nth_unstable_by(k, f64::total_cmp).1;
-    (q / (-2.0 * (1.0 - JITTER_QUANTILE).ln())).sqrt()
+    rayleigh_sigma_px(q, JITTER_QUANTILE)
+}
+
+/// The per-axis sigma of isotropic Gaussian jitter whose magnitude's `q`
+/// quantile, squared, is `quantile_sq_px2`: the Rayleigh quantile is
+/// `sigma sqrt(-2 ln(1 - q))`.
+pub fn rayleigh_sigma_px(quantile_sq_px2: f64, q: f64) -> f64 {
+    (quantile_sq_px2 / (-2.0 * (1.0 - q).ln())).sqrt()
 }
 
 /// Matches `current` markers to the `rest` markers (see the module doc)
@@ -283,19 +290,25 @@ pub fn track_known_adaptive(
 
 /// `field` with its jitter raised to `jitter_px` when that is more, and its
 /// moved markers marked again as [`track_known_adaptive`] marks them.
-pub fn with_jitter_at_least(mut field: Field, jitter_px: f64, floor_px: f64, sigmas: f64) -> Field {
+pub fn with_jitter_at_least(field: Field, jitter_px: f64, floor_px: f64, sigmas: f64) -> Field {
     if jitter_px > field.jitter_px {
-        field.jitter_px = jitter_px;
-        mark_moved(&mut field, floor_px.max(sigmas * jitter_px));
+        with_jitter(field, jitter_px, floor_px, sigmas)
+    } else {
+        field
     }
-    field
 }
 
-fn mark_moved_adaptive(mut field: Field, floor_px: f64, sigmas: f64) -> Field {
-    field.jitter_px = jitter_sigma_px(&field.displacement);
+fn mark_moved_adaptive(field: Field, floor_px: f64, sigmas: f64) -> Field {
+    let jitter_px = jitter_sigma_px(&field.displacement);
+    with_jitter(field, jitter_px, floor_px, sigmas)
+}
+
+/// `field` with jitter `jitter_px`, its markers moved beyond
+/// `max(floor_px, sigmas x jitter_px)`.
+fn with_jitter(mut field: Field, jitter_px: f64, floor_px: f64, sigmas: f64) -> Field {
+    field.jitter_px = jitter_px;
     // `max` ignores a NaN product (sigmas is validated finite anyway).
-    let threshold_px = floor_px.max(sigmas * field.jitter_px);
-    mark_moved(&mut field, threshold_px);
+    mark_moved(&mut field, floor_px.max(sigmas * jitter_px));
     field
 }
 

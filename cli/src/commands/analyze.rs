@@ -425,7 +425,6 @@ fn frame_labels(files: &[PathBuf]) -> Vec<String> {
         .collect()
 }
 
-/// One frame's markers, input-image px (`x,y`, 3 decimals).
 /// Where [`analyze_one`] writes each frame's markers and displacement
 /// field (`--markers-out`, `--field-out`), if anywhere.
 #[derive(Clone, Copy)]
