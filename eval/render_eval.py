@@ -64,6 +64,14 @@ def machine() -> str:
     return f"{platform.node()}: {model}, {cores} cores{load}"
 
 
+# The head of the table of `row`s.
+TABLE_HEAD = [
+    "| category | frames | markers ±1 % | median \\|found − true\\| (median found / true) | contacts found | "
+    "false contacts / no-contact frames | centre err median px | p95 px | t_total ms median |",
+    "|---|---|---|---|---|---|---|---|---|",
+]
+
+
 def run_category(dexitac: str, d: Path) -> tuple[list[dict], float, str]:
     """``dexitac analyze --rest rest.png`` on a category's frames (eval/run.py's runner)."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -135,9 +143,7 @@ def main() -> int:
         "",
         TARGETS,
         "",
-        "| category | frames | markers ±1 % | median \\|found − true\\| (median found / true) | contacts found | "
-        "false contacts / no-contact frames | centre err median px | p95 px | t_total ms median |",
-        "|---|---|---|---|---|---|---|---|---|",
+        *TABLE_HEAD,
     ]
     every: list[tuple[dict, dict]] = []
     by_kind: dict[str, list[tuple[dict, dict]]] = {}

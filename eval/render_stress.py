@@ -9,9 +9,10 @@ frames without contact and half with a contact drawn as in the ``nominal``
 category, all under the condition's light, PSF and noise; the rest frame
 stays the nominal one (rendered once, as ``render.py`` does), as when the
 light or focus changes after calibration. ``dexitac analyze --rest`` (no
-config) runs on each condition's frames and the table gives, per condition:
-markers within ±1 % of the pins in the image, false contacts on the frames
-without contact, contacts found, and the centre error (median / p95, px).
+config) runs on each condition's frames, and ``eval/render_eval.py`` scores
+them: the table has its columns, one row per condition (markers within ±1 %
+of the pins in the image, false contacts on the frames without contact,
+contacts found, centre error median and p95, time).
 
 Conditions (``render.py``'s ``NOMINAL`` with):
 
@@ -27,8 +28,9 @@ Conditions (``render.py``'s ``NOMINAL`` with):
 - ``leds_off``: the housing LEDs off and a tenth of the light on the pins'
   side (``led_gain`` 0, ``gain`` 0.9, gradient 0.5).
 
-Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR,
-with each condition's ``truth.csv`` and ``pred.csv``, kept). Writes
+Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR, in
+``render.py``'s layout, ``<condition>/{rest.png,frames/,truth.csv}``, with
+dexitac's ``dexitac_default.csv``, kept). Writes
 ``<out>/<date>-render-stress.md``.
 """
 
@@ -38,8 +40,6 @@ import argparse
 import csv
 import datetime as dt
 import math
-import platform
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -48,6 +48,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import render as R  # noqa: E402
+import render_eval as E  # noqa: E402
+from run import run_dexitac  # noqa: E402
 
 CONDITIONS = {
     "blur3": dict(psf=3.0),
@@ -74,63 +76,44 @@ def main() -> int:
     sensor = R.sensor_of("nominal", a.seed)
     scene = R.Scene(sensor)
     rest, _, _ = scene.render(None, dict(R.NOMINAL), np.random.default_rng([a.seed, 2000, len("dome")]))
-    rows = []
+    lines = [
+        f"# dexitac on the renderer's dome under other conditions ({a.date})",
+        "",
+        f"`{' '.join(sys.argv)}`",
+        "",
+        f"Machine: {E.machine()}. Rest: the nominal rest frame; the rows are conditions.",
+        "",
+        *E.TABLE_HEAD,
+    ]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(a.keep or tmp)
-        tmp.mkdir(parents=True, exist_ok=True)
-        R.write_png(tmp / "rest.png", rest)
         for name in a.conditions:
             cond = dict(R.NOMINAL, **CONDITIONS[name])
             d = tmp / name
-            d.mkdir(parents=True, exist_ok=True)
-            truth = {}
+            (d / "frames").mkdir(parents=True, exist_ok=True)
+            R.write_png(d / "rest.png", rest)
+            truth = []
             for i in range(a.frames_per_condition):
                 rng = np.random.default_rng([a.seed, 3000 + list(CONDITIONS).index(name), i])
                 contact = R.sample_contact("nominal", sensor, rng) if i % 2 else None
                 img, centre, n_vis = scene.render(contact, cond, rng)
-                R.write_png(d / f"{i:04d}.png", img)
-                truth[f"{i:04d}"] = (centre, n_vis)
+                R.write_png(d / "frames" / f"{i:04d}.png", img)
+                cx, cy = centre if centre is not None else (math.nan, math.nan)
+                truth.append({"frame": f"{i:04d}", "cx": cx, "cy": cy, "n_markers": n_vis})
             with open(d / "truth.csv", "w", newline="") as f:
-                w = csv.writer(f)
-                w.writerow(["frame", "cx", "cy", "n_markers"])
-                for k, (c, n) in truth.items():
-                    w.writerow([k, *(c if c is not None else (math.nan, math.nan)), n])
-            pred = d / "pred.csv"
-            frames = sorted(str(p) for p in d.glob("[0-9]*.png"))
-            subprocess.run([a.dexitac, "analyze", "-q", "--rest", str(tmp / "rest.png"), "--out", str(pred), *frames],
-                           check=True)
-            in1 = false = found = n_contact = n_free = 0
-            err = []
-            for r in csv.DictReader(open(pred)):
-                centre, n_vis = truth[r["frame"]]
-                in1 += abs(int(r["n_markers"]) - n_vis) <= 0.01 * n_vis
-                has = not math.isnan(float(r["cx"]))
-                if centre is None:
-                    n_free += 1
-                    false += has
-                else:
-                    n_contact += 1
-                    if has:
-                        found += 1
-                        err.append(math.hypot(float(r["cx"]) - centre[0], float(r["cy"]) - centre[1]))
-            med = f"{np.median(err):.2f} / {np.percentile(err, 95):.2f}" if err else "–"
-            rows.append(f"| {name} | {in1}/{a.frames_per_condition} | {false}/{n_free} | {found}/{n_contact} | {med} |")
-            print(rows[-1], flush=True)
-    head = [
-        f"# dexitac on the renderer's dome under other conditions ({a.date})",
-        "",
-        f"Machine: {platform.node()}, {platform.processor() or platform.machine()}. "
-        f"Command: `python eval/render_stress.py --dexitac {a.dexitac} --frames-per-condition "
-        f"{a.frames_per_condition} --seed {a.seed}`. Rest: the nominal rest frame.",
-        "",
-        "| condition | markers ±1 % | false contacts | contacts found | centre err median / p95 px |",
-        "|---|---|---|---|---|",
-    ]
+                w = csv.DictWriter(f, fieldnames=list(truth[0]))
+                w.writeheader()
+                w.writerows(truth)
+            rows, _, note = run_dexitac(a.dexitac, d, d / "rest.png", d, "default", None)
+            if note:
+                print(f"{name}: {note}", file=sys.stderr)
+            pred = {r["frame"]: r for r in rows}
+            lines.append(E.row(name, E.score([(t, pred.get(t["frame"])) for t in truth])))
+            print(lines[-1], flush=True)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    (out / f"{a.date}-render-stress.md").write_text("\n".join(head + rows) + "\n")
+    (out / f"{a.date}-render-stress.md").write_text("\n".join(lines) + "\n")
     return 0
-
 
 if __name__ == "__main__":
     raise SystemExit(main())
