@@ -281,7 +281,23 @@ fn detect_in(
     window: [usize; 4],
     typical_range: Option<f32>,
 ) -> Vec<Marker> {
+    detect_split_in(frame, det, window, typical_range, None, &mut Vec::new())
+}
+
+/// [`detect_in`], and with `pin_area_px` (a pin's effective area in this
+/// frame, asked for when first needed) a clipped candidate whose blob
+/// holds two or three touching pins ([`split_chain`]) gives those, in
+/// `chains`, instead of one marker between them or none.
+fn detect_split_in(
+    frame: &GreyFrame,
+    det: &Detector,
+    window: [usize; 4],
+    typical_range: Option<f32>,
+    pin_area_px: Option<&dyn Fn() -> f32>,
+    chains: &mut Vec<Vec<Marker>>,
+) -> Vec<Marker> {
     let (fw, fh) = (frame.width(), frame.height());
+    let first_chain = chains.len();
     let [x0, y0, x1, y1] = window;
     let (x1, y1) = (x1.min(fw), y1.min(fh));
     let (x0, y0) = (x0.min(x1), y0.min(y1));
@@ -348,6 +364,34 @@ fn detect_in(
         let (lo, range) = env.at(x, y);
         let guess = to_work(x, y);
         let need = |p: PointPx| det.min_rel_strength * range * det.surface.foreshortening(p) as f32;
+        // Pins a press squeezed into one blob: the DoH sees a ridge (no
+        // marker) or one blob between two (a marker on neither). The
+        // candidate's centroid, when measured here, is used again below.
+        let mut first_centroid = None;
+        if let Some(pin_area_px) = pin_area_px.filter(|_| peak == u8::MAX && det.may_hold(guess)) {
+            let pin_area_px = pin_area_px();
+            let blob = refine(frame, guess, det.radius_px, det.min_contrast);
+            first_centroid = Some((guess, blob));
+            let half_maximum = (lo + 0.5 * range).clamp(1.0, 255.0) as u8;
+            if let Some(pins) = blob
+                .filter(|b| b.2 >= CHAIN_MIN_WINDOW_AREA * pin_area_px)
+                .and_then(|b| split_chain(frame, b.0, half_maximum, pin_area_px))
+            {
+                let pin = |pos: PointPx| Marker {
+                    pos,
+                    strength: need(pos),
+                    peak,
+                    rel_level: (peak as f32 - lo) / range,
+                    rel_strength: need(pos) / range,
+                    area_px: pin_area_px,
+                    followed_from: None,
+                };
+                if pins.iter().all(|&p| det.keeps(p, pin_area_px)) {
+                    chains.push(pins.into_iter().map(pin).collect());
+                }
+                continue;
+            }
+        }
         let mut strength = determinant_at(&ii, w + 1, x, y, lobe).sqrt();
         if strength < need(guess)
             && (bin > 1 || lobe > FINE_LOBE_PX)
@@ -389,7 +433,11 @@ fn detect_in(
         // A saturated marker's candidate is its plateau's first pixel, off
         // the centre: one more pass from the first centroid re-centres the
         // window on the blob.
-        let refined = refine(frame, guess, det.radius_px, det.min_contrast).and_then(|r| {
+        let first = match first_centroid {
+            Some((at, blob)) if at == guess => blob,
+            _ => refine(frame, guess, det.radius_px, det.min_contrast),
+        };
+        let refined = first.and_then(|r| {
             let p = r.0;
             if (p.x - guess.x).abs().max((p.y - guess.y).abs()) > RECENTRE_PX {
                 refine(frame, p, det.radius_px, det.min_contrast)
@@ -414,7 +462,27 @@ fn detect_in(
             }
         }
     }
+    // A marker between two pins of a split blob (a candidate of the same
+    // blob whose window saw too little of it to split) is neither.
+    let between: Vec<(PointPx, f64)> = chains[first_chain..]
+        .iter()
+        .flat_map(|pins| pins.windows(2).map(|p| between_pins(p[0].pos, p[1].pos)))
+        .collect();
+    if !between.is_empty() {
+        list.retain(|m| {
+            between
+                .iter()
+                .all(|&(c, r)| (m.pos.x - c.x).powi(2) + (m.pos.y - c.y).powi(2) > r * r)
+        });
+    }
     list
+}
+
+/// The middle of two touching pins `a` and `b`, and how near it a marker
+/// sees both of them (a quarter of their distance), px.
+fn between_pins(a: PointPx, b: PointPx) -> (PointPx, f64) {
+    let mid = PointPx::new(0.5 * (a.x + b.x), 0.5 * (a.y + b.y));
+    (mid, 0.25 * (a.x - b.x).hypot(a.y - b.y))
 }
 
 /// Markers found by following known markers instead of searching the
@@ -1057,8 +1125,22 @@ fn search_around(
     let mut searched: Vec<Marker> = Vec::new();
     let span = boxes.iter().fold([wx1, wy1, wx0, wy0], |a, b| union(&a, b));
     let mut taken = Occupancy::new(span);
+    // A followed pin's effective area (a blob of two is twice that),
+    // measured when a clipped candidate first needs it.
+    let areas_px: Vec<f32> = list.iter().map(|m| m.area_px).collect();
+    let pin_area = std::cell::OnceCell::new();
+    let pin_area_px = || *pin_area.get_or_init(|| percentile(areas_px.clone(), 0.5));
+    let mut chains: Vec<Vec<Marker>> = Vec::new();
     for b in boxes {
-        for m in detect_in(frame, det, b, Some(typical_range)) {
+        let found = detect_split_in(
+            frame,
+            det,
+            b,
+            Some(typical_range),
+            Some(&pin_area_px),
+            &mut chains,
+        );
+        for m in found {
             let p = m.pos;
             let Some((j, d)) = followed_index
                 .nearest(&followed_at, p, same_px)
@@ -1085,6 +1167,24 @@ fn search_around(
                     m.rel_strength *= contrast / m.strength.max(1.0);
                     (m.pos, m.strength, m.area_px) = (pos, contrast, area_px);
                 }
+            }
+        }
+    }
+    // Pins in one blob: a followed marker between two of them is neither
+    // (its window saw both); one on a pin is that pin.
+    for pins in chains {
+        for p in pins.windows(2) {
+            let (mid, off_px) = between_pins(p[0].pos, p[1].pos);
+            // (The index answers within its cell size, `same_px`.)
+            for (i, _) in followed_index.within(&followed_at, mid, off_px.min(same_px)) {
+                unconfirmed[in_reach[i]] = true;
+            }
+        }
+        for m in pins {
+            match followed_index.nearest(&followed_at, m.pos, DUPLICATE_PX) {
+                Some((i, _)) => unconfirmed[in_reach[i]] = false,
+                None if taken.claim(m.pos, DUPLICATE_PX, &searched) => searched.push(m),
+                None => {}
             }
         }
     }
@@ -1360,6 +1460,170 @@ fn plateau_centre(
     let xm = middle(x, lo_x, hi_x, &|k| on(k, y));
     (xm, middle(y, lo_y, hi_y, &|k| on(xm, k)))
 }
+
+/// The pins of a blob that holds two or three touching ones in a row (a
+/// press squeezes pins together; clipped ones then run into one plateau):
+/// the pixels at or above `level` 4-connected to `at`, within two pin
+/// diameters of it, [`CHAIN_MIN_CLIPPED`] of a pin's area of them clipped.
+/// Discs of radius `r` in a row whose centres are `d` apart have the minor
+/// variance `r^2/4` and the major `r^2/4 + d^2 (k^2 - 1)/12`: the blob's
+/// elongation (major over minor) gives `k` ([`CHAIN_ELONGATION`]), its
+/// area must suit `k` pins of about the frame's size (`pin_area_px`;
+/// [`CHAIN_AREA`]), and between each two pins the blob must narrow
+/// ([`CHAIN_NECK`]; a single pin that a press tilted and enlarged is an
+/// ellipse, widest in its middle). The pins are placed `d` apart along the
+/// major axis, centred on the blob's centroid. `None` for any other blob,
+/// one that reaches the window's edge included.
+fn split_chain(
+    frame: &GreyFrame,
+    at: PointPx,
+    level: u8,
+    pin_area_px: f32,
+) -> Option<Vec<PointPx>> {
+    let (w, h) = (frame.width(), frame.height());
+    let data = frame.data();
+    if !(at.x >= 0.0 && at.y >= 0.0) || pin_area_px <= 0.0 {
+        return None;
+    }
+    let (sx, sy) = ((at.x + 0.5) as usize, (at.y + 0.5) as usize);
+    if sx >= w || sy >= h || data[sy * w + sx] < level {
+        return None;
+    }
+    let diameter_px = 2.0 * (pin_area_px as f64 / std::f64::consts::PI).sqrt();
+    let reach = (2.0 * diameter_px) as usize + 2;
+    // Most candidates are one pin: a chord through `at` along the nearest
+    // of four directions to the blob's axis crosses two touching pins over
+    // at least 1.85 diameters (3.7 radii at 22.5 degrees), one pin over
+    // one; no fill for those.
+    let longest_chord_px = [(1, 0), (0, 1), (1, 1), (1, -1)]
+        .iter()
+        .map(|&(dx, dy): &(i64, i64)| {
+            let run = |sign: i64| {
+                (1..=reach as i64)
+                    .take_while(|&t| {
+                        let (x, y) = (sx as i64 + sign * t * dx, sy as i64 + sign * t * dy);
+                        x >= 0
+                            && y >= 0
+                            && (x as usize) < w
+                            && (y as usize) < h
+                            && data[y as usize * w + x as usize] >= level
+                    })
+                    .count()
+            };
+            (1 + run(1) + run(-1)) as f64 * ((dx * dx + dy * dy) as f64).sqrt()
+        })
+        .fold(0.0, f64::max);
+    if longest_chord_px < CHAIN_MIN_CHORD * diameter_px {
+        return None;
+    }
+    let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
+    let (x1, y1) = ((sx + reach).min(w - 1), (sy + reach).min(h - 1));
+    let span = x1 - x0 + 1;
+    let max_count = (CHAIN_AREA[1].1 * pin_area_px) as usize;
+    let mut blob = vec![(sx, sy)];
+    let mut seen = vec![false; span * (y1 - y0 + 1)];
+    seen[(sy - y0) * span + sx - x0] = true;
+    let mut next = 0;
+    while let Some(&(x, y)) = blob.get(next) {
+        next += 1;
+        if x == x0 || y == y0 || x == x1 || y == y1 || blob.len() > max_count {
+            return None;
+        }
+        for (nx, ny) in [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)] {
+            let k = (ny - y0) * span + nx - x0;
+            if !seen[k] && data[ny * w + nx] >= level {
+                seen[k] = true;
+                blob.push((nx, ny));
+            }
+        }
+    }
+    // Only clipped pins run into one plateau; unclipped ones keep a
+    // darker neck between them, where the DoH sees each.
+    let clipped = blob.iter().filter(|&&(x, y)| data[y * w + x] == u8::MAX);
+    if (clipped.count() as f32) < CHAIN_MIN_CLIPPED * pin_area_px {
+        return None;
+    }
+    let count = blob.len() as f64;
+    let offset = |&(x, y): &(usize, usize)| (x as f64 - sx as f64, y as f64 - sy as f64);
+    let (mx, my) = blob
+        .iter()
+        .map(offset)
+        .fold((0.0, 0.0), |a, (x, y)| (a.0 + x, a.1 + y));
+    let (mx, my) = (mx / count, my / count);
+    let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+    for (x, y) in blob.iter().map(offset) {
+        let (dx, dy) = (x - mx, y - my);
+        (a, b, c) = (a + dx * dx, b + dx * dy, c + dy * dy);
+    }
+    let (a, b, c) = (a / count, b / count, c / count);
+    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (major, minor) = (0.5 * (a + c) + root, 0.5 * (a + c) - root);
+    let k = (2..)
+        .zip(CHAIN_ELONGATION)
+        .find_map(|(k, (lo, hi))| (major >= lo * minor && major < hi * minor).then_some(k))?;
+    let (lo, hi) = CHAIN_AREA[k - 2];
+    if !(count >= lo as f64 * pin_area_px as f64 && count <= hi as f64 * pin_area_px as f64) {
+        return None;
+    }
+    // The major axis: the eigenvector of (a b; b c) for `major`.
+    let (ex, ey) = if b.abs() > 1e-12 {
+        (major - c, b)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let norm = ex.hypot(ey);
+    let (ex, ey) = (ex / norm, ey / norm);
+    let kf = k as f64;
+    let d = (12.0 * (major - minor) / (kf * kf - 1.0)).sqrt();
+    // Along the axis, pin i sits at t = (i - (k - 1)/2) d from the
+    // centroid; the blob's pixels within half a pixel of t measure its
+    // width there.
+    let along: Vec<f64> = blob
+        .iter()
+        .map(offset)
+        .map(|(x, y)| (x - mx) * ex + (y - my) * ey)
+        .collect();
+    let width = |t: f64| along.iter().filter(|&&u| (u - t).abs() < 0.5).count() as f64;
+    let at_pin = |i: usize| (i as f64 - 0.5 * (kf - 1.0)) * d;
+    let necked = (0..k - 1).all(|i| {
+        let (t0, t1) = (at_pin(i), at_pin(i + 1));
+        width(0.5 * (t0 + t1)) <= CHAIN_NECK * width(t0).min(width(t1))
+    });
+    if !necked {
+        return None;
+    }
+    let (cx, cy) = (sx as f64 + mx, sy as f64 + my);
+    Some(
+        (0..k)
+            .map(|i| PointPx::new(cx + at_pin(i) * ex, cy + at_pin(i) * ey))
+            .collect(),
+    )
+}
+
+/// [`split_chain`]: a blob of 2 and of 3 pins covers this many pin areas
+/// (a press enlarges the pins it tilts, up to about 1.5 times).
+const CHAIN_AREA: [(f32, f32); 2] = [(1.5, 3.6), (2.3, 5.0)];
+/// [`split_chain`]: the major variance over the minor of 2 and of 3 discs
+/// in a row (2: 2 with centres a radius apart, 5 touching; 3: 3.7 and
+/// 11.7). An outer ring's pin, foreshortened to half its width, has 4 but
+/// about half a pin's area.
+const CHAIN_ELONGATION: [(f64, f64); 2] = [(2.0, 7.0), (7.0, 16.0)];
+/// [`split_chain`]: between two pins the blob is at most this fraction of
+/// its width at either pin (two discs whose centres are 1.5 radii apart:
+/// 0.66).
+const CHAIN_NECK: f64 = 0.85;
+/// [`split_chain`] fills a blob only where its longest chord through the
+/// candidate (of four directions) reaches this many pin diameters.
+const CHAIN_MIN_CHORD: f64 = 1.6;
+/// [`split_chain`]: a blob with fewer clipped pixels than this many pin
+/// areas is left alone.
+const CHAIN_MIN_CLIPPED: f32 = 0.25;
+/// A candidate whose centroid window has this many pin areas above half
+/// maximum is looked at as a chain ([`split_chain`]); a window around two
+/// touching pins holds about 1.5.
+const CHAIN_MIN_WINDOW_AREA: f32 = 1.25;
 
 /// [`plateau_centre`]'s tolerance: this fraction of the local range (a
 /// binarised pin under vignetting of 0.55 varies by 3 % across itself).
@@ -2597,6 +2861,137 @@ mod tests {
         assert_eq!(levels.fit(&rest, &few), None);
         // Levels made for another rest.
         assert_eq!(levels.fit(&rest[1..], &frame(&blurred(1.75))[1..]), None);
+    }
+
+    /// A 64 x 64 frame of level 60 with clipped (255) blobs: ellipses
+    /// `(centre, semi-axes (x, y))`, their edges anti-aliased over a pixel.
+    fn clipped_blobs(blobs: &[(PointPx, (f64, f64))]) -> GreyFrame {
+        let data = (0..64 * 64)
+            .map(|k| {
+                let (x, y) = ((k % 64) as f64, (k / 64) as f64);
+                let cover = blobs
+                    .iter()
+                    .map(|&(c, (a, b))| {
+                        let r = ((x - c.x) / a).hypot((y - c.y) / b);
+                        // Distance inside the edge, in px along the
+                        // smaller axis (exact for discs).
+                        ((1.0 - r) * a.min(b) + 0.5).clamp(0.0, 1.0)
+                    })
+                    .fold(0.0, f64::max);
+                (60.0 + 195.0 * cover).round() as u8
+            })
+            .collect();
+        GreyFrame::new(64, 64, data).unwrap()
+    }
+
+    #[test]
+    fn clipped_pins_run_together_are_split_and_an_enlarged_pin_is_not() {
+        let pin = (5.0, 5.0);
+        let area = (std::f64::consts::PI * 25.0) as f32;
+        let (level, at) = (157, PointPx::new(32.0, 32.0));
+        let near = |got: &[PointPx], want: &[PointPx]| {
+            got.len() == want.len()
+                && want
+                    .iter()
+                    .all(|w| got.iter().any(|g| (g.x - w.x).hypot(g.y - w.y) < 0.5))
+        };
+        // Two pins 9 px apart along a slope, and three in a row 9.5 px
+        // apart.
+        let (dx, dy) = (9.0 * 0.8, 9.0 * 0.6);
+        let two = [
+            PointPx::new(32.0 - dx / 2.0, 32.0 - dy / 2.0),
+            PointPx::new(32.0 + dx / 2.0, 32.0 + dy / 2.0),
+        ];
+        let got = split_chain(&clipped_blobs(&two.map(|c| (c, pin))), at, level, area);
+        assert!(near(got.as_deref().unwrap_or(&[]), &two), "{got:?}");
+        let three = [22.5, 32.0, 41.5].map(|x| PointPx::new(x, 32.0));
+        let got = split_chain(&clipped_blobs(&three.map(|c| (c, pin))), at, level, area);
+        assert!(near(got.as_deref().unwrap_or(&[]), &three), "{got:?}");
+        // One pin, tilted and enlarged by a press: an ellipse of 1.6 pin
+        // areas and the elongation of two pins, but no neck.
+        let tilted = clipped_blobs(&[(at, (9.0, 4.5))]);
+        assert_eq!(split_chain(&tilted, at, level, area), None);
+        // Two unclipped pins: their neck is darker, and the DoH sees each.
+        let mut dim = clipped_blobs(&two.map(|c| (c, pin)));
+        let dimmed: Vec<u8> = dim.data().iter().map(|&v| v.min(230)).collect();
+        dim = GreyFrame::new(64, 64, dimmed).unwrap();
+        assert_eq!(split_chain(&dim, at, 145, area), None);
+        // A blob larger than three pins, and one that reaches past two pin
+        // diameters, are left alone.
+        let big = clipped_blobs(&[(at, (9.0, 9.0))]);
+        assert_eq!(split_chain(&big, at, level, area), None);
+        let long = clipped_blobs(&[(at, (26.0, 4.0))]);
+        assert_eq!(split_chain(&long, at, level, area), None);
+    }
+
+    #[test]
+    fn clipped_pins_a_press_pushed_together_are_each_found() {
+        // Flat-topped clipped pins (radius 6 px, pitch 18 px, a 1 px
+        // blur). A press hides the pin under it and pushes the two pins
+        // above it, and the two below, 4.5 px towards each other: each
+        // pair runs into one plateau (centres 9 px apart), which following
+        // sees as one blob. Without the split, one pin of a pair is 16 px
+        // from the nearest marker.
+        let (w, h, pitch) = (420, 420, 18.0);
+        let rest_pins = test_fixtures::hex_points(w, h, pitch);
+        let draw = |pins: &[PointPx]| {
+            let data = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f64, (i / w) as f64);
+                    let on = pins.iter().any(|p| (p.x - x).hypot(p.y - y) <= 6.0);
+                    if on {
+                        255
+                    } else {
+                        30
+                    }
+                })
+                .collect();
+            GreyFrame::new(w, h, data).unwrap().blurred(1.0)
+        };
+        let nearest = |q: PointPx| {
+            let d = |k: usize| (rest_pins[k].x - q.x).hypot(rest_pins[k].y - q.y);
+            (0..rest_pins.len())
+                .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+                .unwrap()
+        };
+        let mut pins = rest_pins.clone();
+        let pressed = nearest(PointPx::new(210.0, 210.0));
+        let c = rest_pins[pressed];
+        let mut moved = Vec::new();
+        for dy in [-1.0, 1.0] {
+            let row = 0.75f64.sqrt() * pitch * dy;
+            let left = nearest(PointPx::new(c.x - 0.5 * pitch, c.y + row));
+            let right = nearest(PointPx::new(c.x + 0.5 * pitch, c.y + row));
+            pins[left].x += 4.5;
+            pins[right].x -= 4.5;
+            moved.extend([left, right]);
+        }
+        let params = crate::params::Params::default();
+        let rest = draw(&rest_pins);
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest), &params).unwrap();
+        let mut shown = pins.clone();
+        shown.remove(pressed);
+        let (found, search) = follow_or_search(
+            &draw(&shown),
+            &cal.detector,
+            &cal.reference(),
+            0.3 * cal.pitch_px,
+            Some(cal.pitch_px),
+        );
+        assert_eq!(search, Search::Local);
+        let found = found.positions();
+        for &k in &moved {
+            let off = found
+                .iter()
+                .map(|f| (f.x - pins[k].x).hypot(f.y - pins[k].y))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                off < 0.5,
+                "pin {k} at {:?}: nearest marker {off:.2} px",
+                pins[k]
+            );
+        }
+        assert_eq!(found.len() + 1, cal.rest_markers.len());
     }
 
     #[test]
