@@ -29,7 +29,9 @@
 //! searches for the ones it loses (moved too far, hidden or merged by a
 //! contact) in boxes around their rest places, and searches the whole
 //! frame when a contact lost a quarter of them, or when the followed
-//! windows look like noise (`noise_like`). On a dome
+//! windows look like noise (`noise_like`). In those boxes, clipped pins a
+//! press squeezed into one plateau are split into the two or three pins
+//! it holds (`split_chain`). On a dome
 //! ([`crate::surface`]) the strength threshold is eased by the
 //! foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
