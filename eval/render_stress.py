@@ -63,6 +63,14 @@ CONDITIONS = {
 }
 
 
+def condition_contacts(name: str, sensor, seed: int, k: int):
+    """Per frame of a condition: its index, its generator (the frame's noise
+    comes next) and its contact (every odd frame, drawn as in ``nominal``)."""
+    for i in range(k):
+        rng = np.random.default_rng([seed, 3000 + list(CONDITIONS).index(name), i])
+        yield i, rng, (R.sample_contact("nominal", sensor, rng) if i % 2 else None)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", required=True)
@@ -93,9 +101,7 @@ def main() -> int:
             (d / "frames").mkdir(parents=True, exist_ok=True)
             R.write_png(d / "rest.png", rest)
             truth = []
-            for i in range(a.frames_per_condition):
-                rng = np.random.default_rng([a.seed, 3000 + list(CONDITIONS).index(name), i])
-                contact = R.sample_contact("nominal", sensor, rng) if i % 2 else None
+            for i, rng, contact in condition_contacts(name, sensor, a.seed, a.frames_per_condition):
                 img, centre, n_vis = scene.render(contact, cond, rng)
                 R.write_png(d / "frames" / f"{i:04d}.png", img)
                 cx, cy = centre if centre is not None else (math.nan, math.nan)
