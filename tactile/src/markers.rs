@@ -29,9 +29,9 @@
 //! searches for the ones it loses (moved too far, hidden or merged by a
 //! contact) in boxes around their rest places, and searches the whole
 //! frame when a contact lost a quarter of them, or when the followed
-//! windows look like noise (`noise_like`). In those boxes, clipped pins a
-//! press squeezed into one plateau are split into the two or three pins
-//! it holds (`split_chain`). On a dome
+//! windows look like noise (`noise_like`). In those boxes, pins a press
+//! squeezed into one blob are split into the two or three pins it holds
+//! (`split_chain`). On a dome
 //! ([`crate::surface`]) the strength threshold is eased by the
 //! foreshortening, and each marker's
 //! centroid window stops short of its nearest neighbour
@@ -287,9 +287,9 @@ fn detect_in(
 }
 
 /// [`detect_in`], and with `pin_area_px` (a pin's effective area in this
-/// frame, asked for when first needed) a clipped candidate whose blob
-/// holds two or three touching pins ([`split_chain`]) gives those, in
-/// `chains`, instead of one marker between them or none.
+/// frame, asked for when first needed) a candidate whose blob holds two or
+/// three touching pins ([`split_chain`]) gives those, in `chains`, instead
+/// of one marker between them or none.
 fn detect_split_in(
     frame: &GreyFrame,
     det: &Detector,
@@ -370,7 +370,7 @@ fn detect_split_in(
         // marker) or one blob between two (a marker on neither). The
         // candidate's centroid, when measured here, is used again below.
         let mut first_centroid = None;
-        if let Some(pin_area_px) = pin_area_px.filter(|_| peak == u8::MAX && det.may_hold(guess)) {
+        if let Some(pin_area_px) = pin_area_px.filter(|_| det.may_hold(guess)) {
             let pin_area_px = pin_area_px();
             let blob = refine(frame, guess, det.radius_px, det.min_contrast);
             first_centroid = Some((guess, blob));
@@ -1464,14 +1464,16 @@ fn plateau_centre(
 }
 
 /// The pins of a blob that holds two or three touching ones in a row (a
-/// press squeezes pins together; clipped ones then run into one plateau):
-/// the pixels at or above `level` 4-connected to `at`, within two pin
-/// diameters of it, [`CHAIN_MIN_CLIPPED`] of a pin's area of them clipped.
+/// press squeezes pins together, and the outer rings' foreshortened ones
+/// against the rim; clipped pins run into one plateau): the pixels at or
+/// above `level` 4-connected to `at`, within two pin diameters of it.
 /// Discs of radius `r` in a row whose centres are `d` apart have the minor
 /// variance `r^2/4` and the major `r^2/4 + d^2 (k^2 - 1)/12`: the blob's
 /// elongation (major over minor) gives `k` ([`CHAIN_ELONGATION`]), its
-/// area must suit `k` pins of about the frame's size (`pin_area_px`;
-/// [`CHAIN_AREA`]), and between each two pins the blob must narrow
+/// effective area (each pixel's height above `level` over the blob's top's,
+/// summed: a flat top's own area, as [`refine`] measures a pin's) must suit
+/// `k` pins of about the frame's size (`pin_area_px`; [`CHAIN_AREA`]), and
+/// between each two pins the blob must narrow
 /// ([`CHAIN_NECK`]; a single pin that a press tilted and enlarged is an
 /// ellipse, widest in its middle). The pins are placed `d` apart along the
 /// major axis, centred on the blob's centroid. `None` for any other blob,
@@ -1521,7 +1523,9 @@ fn split_chain(
     let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
     let (x1, y1) = ((sx + reach).min(w - 1), (sy + reach).min(h - 1));
     let span = x1 - x0 + 1;
-    let max_count = (CHAIN_AREA[1].1 * pin_area_px) as usize;
+    // A blurred pin covers about twice its effective area above half
+    // maximum; a blob larger than that many for three pins is no chain.
+    let max_count = (2.0 * CHAIN_AREA[1].1 * pin_area_px) as usize;
     let mut blob = vec![(sx, sy)];
     let mut seen = vec![false; span * (y1 - y0 + 1)];
     seen[(sy - y0) * span + sx - x0] = true;
@@ -1539,13 +1543,17 @@ fn split_chain(
             }
         }
     }
-    // Only clipped pins run into one plateau; unclipped ones keep a
-    // darker neck between them, where the DoH sees each.
-    let clipped = blob.iter().filter(|&&(x, y)| data[y * w + x] == u8::MAX);
-    if (clipped.count() as f32) < CHAIN_MIN_CLIPPED * pin_area_px {
-        return None;
-    }
     let count = blob.len() as f64;
+    let top = blob
+        .iter()
+        .map(|&(x, y)| data[y * w + x])
+        .max()
+        .unwrap_or(level);
+    let height = (top as f64 - level as f64).max(1.0);
+    let area_px: f64 = blob
+        .iter()
+        .map(|&(x, y)| (data[y * w + x] as f64 - level as f64) / height)
+        .sum();
     let offset = |&(x, y): &(usize, usize)| (x as f64 - sx as f64, y as f64 - sy as f64);
     let (mx, my) = blob
         .iter()
@@ -1564,7 +1572,8 @@ fn split_chain(
         .zip(CHAIN_ELONGATION)
         .find_map(|(k, (lo, hi))| (major >= lo * minor && major < hi * minor).then_some(k))?;
     let (lo, hi) = CHAIN_AREA[k - 2];
-    if !(count >= lo as f64 * pin_area_px as f64 && count <= hi as f64 * pin_area_px as f64) {
+    let pins = area_px / pin_area_px as f64;
+    if !(pins >= lo as f64 && pins <= hi as f64) {
         return None;
     }
     // The major axis: the eigenvector of (a b; b c) for `major`.
@@ -1619,12 +1628,9 @@ const CHAIN_NECK: f64 = 0.85;
 /// [`split_chain`] fills a blob only where its longest chord through the
 /// candidate (of four directions) reaches this many pin diameters.
 const CHAIN_MIN_CHORD: f64 = 1.6;
-/// [`split_chain`]: a blob with fewer clipped pixels than this many pin
-/// areas is left alone.
-const CHAIN_MIN_CLIPPED: f32 = 0.25;
-/// A candidate whose centroid window has this many pin areas above half
-/// maximum is looked at as a chain ([`split_chain`]); a window around two
-/// touching pins holds about 1.5.
+/// A candidate whose centroid window has this many pin areas (effective
+/// area above half maximum) is looked at as a chain ([`split_chain`]); a
+/// window around two touching pins holds about 1.5.
 const CHAIN_MIN_WINDOW_AREA: f32 = 1.25;
 
 /// [`plateau_centre`]'s tolerance: this fraction of the local range (a
@@ -2887,7 +2893,7 @@ mod tests {
     }
 
     #[test]
-    fn clipped_pins_run_together_are_split_and_an_enlarged_pin_is_not() {
+    fn pins_run_together_are_split_and_an_enlarged_pin_is_not() {
         let pin = (5.0, 5.0);
         let area = (std::f64::consts::PI * 25.0) as f32;
         let (level, at) = (157, PointPx::new(32.0, 32.0));
@@ -2909,15 +2915,27 @@ mod tests {
         let three = [22.5, 32.0, 41.5].map(|x| PointPx::new(x, 32.0));
         let got = split_chain(&clipped_blobs(&three.map(|c| (c, pin))), at, level, area);
         assert!(near(got.as_deref().unwrap_or(&[]), &three), "{got:?}");
-        // One pin, tilted and enlarged by a press: an ellipse of 1.6 pin
+        // One pin, tilted and enlarged by a press: an ellipse of two pin
         // areas and the elongation of two pins, but no neck.
-        let tilted = clipped_blobs(&[(at, (9.0, 4.5))]);
+        let tilted = clipped_blobs(&[(at, (10.0, 5.0))]);
         assert_eq!(split_chain(&tilted, at, level, area), None);
-        // Two unclipped pins: their neck is darker, and the DoH sees each.
-        let mut dim = clipped_blobs(&two.map(|c| (c, pin)));
-        let dimmed: Vec<u8> = dim.data().iter().map(|&v| v.min(230)).collect();
-        dim = GreyFrame::new(64, 64, dimmed).unwrap();
-        assert_eq!(split_chain(&dim, at, 145, area), None);
+        // Two touching pins unclipped (their tops at 200) and blurred by
+        // 1.2 px, against a pin's effective area as `refine` measures it
+        // on one such pin.
+        let soft = |centres: &[PointPx]| {
+            let sharp = clipped_blobs(&centres.iter().map(|&c| (c, pin)).collect::<Vec<_>>());
+            let top: Vec<u8> = sharp.data().iter().map(|&v| v.min(200)).collect();
+            GreyFrame::new(64, 64, top).unwrap().blurred(1.2)
+        };
+        let (_, _, soft_area) = refine(&soft(&[at]), at, 5.0, 1.0).unwrap();
+        let touching = [PointPx::new(27.0, 32.0), PointPx::new(37.0, 32.0)];
+        let got = split_chain(&soft(&touching), at, 130, soft_area);
+        assert!(near(got.as_deref().unwrap_or(&[]), &touching), "{got:?}");
+        // Two pins 3 px apart at their edges are two blobs: the fill holds
+        // one pin.
+        let apart = [PointPx::new(25.5, 32.0), PointPx::new(38.5, 32.0)];
+        let blobs = clipped_blobs(&apart.map(|c| (c, pin)));
+        assert_eq!(split_chain(&blobs, apart[0], level, area), None);
         // A blob larger than three pins, and one that reaches past two pin
         // diameters, are left alone.
         let big = clipped_blobs(&[(at, (9.0, 9.0))]);
