@@ -1495,37 +1495,17 @@ fn split_chain(
     }
     let diameter_px = 2.0 * (pin_area_px as f64 / std::f64::consts::PI).sqrt();
     let reach = (2.0 * diameter_px) as usize + 2;
-    // Most candidates are one pin: a chord through `at` along the nearest
-    // of four directions to the blob's axis crosses two touching pins over
-    // at least 1.85 diameters (3.7 radii at 22.5 degrees), one pin over
-    // one; no fill for those.
-    let longest_chord_px = [(1, 0), (0, 1), (1, 1), (1, -1)]
-        .iter()
-        .map(|&(dx, dy): &(i64, i64)| {
-            let run = |sign: i64| {
-                (1..=reach as i64)
-                    .take_while(|&t| {
-                        let (x, y) = (sx as i64 + sign * t * dx, sy as i64 + sign * t * dy);
-                        x >= 0
-                            && y >= 0
-                            && (x as usize) < w
-                            && (y as usize) < h
-                            && data[y as usize * w + x as usize] >= level
-                    })
-                    .count()
-            };
-            (1 + run(1) + run(-1)) as f64 * ((dx * dx + dy * dy) as f64).sqrt()
-        })
-        .fold(0.0, f64::max);
-    if longest_chord_px < CHAIN_MIN_CHORD * diameter_px {
+    if !chord_says_chain(frame, at, level, diameter_px) {
         return None;
     }
     let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
     let (x1, y1) = ((sx + reach).min(w - 1), (sy + reach).min(h - 1));
     let span = x1 - x0 + 1;
-    // A blurred pin covers about twice its effective area above half
-    // maximum; a blob larger than that many for three pins is no chain.
-    let max_count = (2.0 * CHAIN_AREA[1].1 * pin_area_px) as usize;
+    // A blob larger than three pins' effective area (a flat top's pixel
+    // count; a blurred pin covers about twice its effective area above
+    // half maximum, so three blurred pins in a row are left alone) is no
+    // chain, and is not filled further.
+    let max_count = (CHAIN_AREA[1].1 * pin_area_px) as usize;
     let mut blob = vec![(sx, sy)];
     let mut seen = vec![false; span * (y1 - y0 + 1)];
     seen[(sy - y0) * span + sx - x0] = true;
@@ -1613,6 +1593,36 @@ fn split_chain(
     )
 }
 
+/// Whether the chords through `at` (the pixels at or above `level`, along
+/// four directions) may cross a chain of pins of `diameter_px`: most
+/// candidates are one pin. A chord along the nearest of the four
+/// directions to a chain's axis crosses two touching pins over at least
+/// 1.85 diameters (3.7 radii at 22.5 degrees), one pin over one, and the
+/// chord across it (through the neck) is much shorter
+/// ([`CHAIN_MIN_CHORD`], [`CHAIN_CHORD_RATIO`]).
+fn chord_says_chain(frame: &GreyFrame, at: PointPx, level: u8, diameter_px: f64) -> bool {
+    let (w, h) = (frame.width() as i64, frame.height() as i64);
+    let data = frame.data();
+    let (sx, sy) = ((at.x + 0.5) as i64, (at.y + 0.5) as i64);
+    let reach = (2.0 * diameter_px) as i64 + 2;
+    let chords_px = [(1, 0), (0, 1), (1, 1), (1, -1)].map(|(dx, dy): (i64, i64)| {
+        let run = |sign: i64| {
+            (1..=reach)
+                .take_while(|&t| {
+                    let (x, y) = (sx + sign * t * dx, sy + sign * t * dy);
+                    x >= 0 && y >= 0 && x < w && y < h && data[(y * w + x) as usize] >= level
+                })
+                .count()
+        };
+        (1 + run(1) + run(-1)) as f64 * ((dx * dx + dy * dy) as f64).sqrt()
+    });
+    // The longest chord, and the one across it (the directions come in
+    // perpendicular pairs).
+    let long = (0..4).fold(0, |b, i| if chords_px[i] > chords_px[b] { i } else { b });
+    chords_px[long] >= CHAIN_MIN_CHORD * diameter_px
+        && chords_px[long] >= CHAIN_CHORD_RATIO * chords_px[long ^ 1]
+}
+
 /// [`split_chain`]: a blob of 2 and of 3 pins covers this many pin areas
 /// (a press enlarges the pins it tilts, up to about 1.5 times).
 const CHAIN_AREA: [(f32, f32); 2] = [(1.5, 3.6), (2.3, 5.0)];
@@ -1628,6 +1638,10 @@ const CHAIN_NECK: f64 = 0.85;
 /// [`split_chain`] fills a blob only where its longest chord through the
 /// candidate (of four directions) reaches this many pin diameters.
 const CHAIN_MIN_CHORD: f64 = 1.6;
+/// [`split_chain`] fills a blob only where its longest chord through the
+/// candidate is this many times the chord across it (two discs whose
+/// centres are a radius apart: 1.7; one round pin: 1).
+const CHAIN_CHORD_RATIO: f64 = 1.5;
 /// A candidate whose centroid window has this many pin areas (effective
 /// area above half maximum) is looked at as a chain ([`split_chain`]); a
 /// window around two touching pins holds about 1.5.
