@@ -121,5 +121,6 @@ def main() -> int:
     (out / f"{a.date}-render-stress.md").write_text("\n".join(lines) + "\n")
     return 0
 
+
 if __name__ == "__main__":
     raise SystemExit(main())

@@ -287,15 +287,15 @@ fn detect_in(
 }
 
 /// [`detect_in`], and with `pin_area_px` (a pin's effective area in this
-/// frame, asked for when first needed) a candidate whose blob holds two or
-/// three touching pins ([`split_chain`]) gives those, in `chains`, instead
-/// of one marker between them or none.
+/// frame) a candidate whose blob holds two or three touching pins
+/// ([`split_chain`]) gives those, in `chains`, instead of one marker between
+/// them or none.
 fn detect_split_in(
     frame: &GreyFrame,
     det: &Detector,
     window: [usize; 4],
     typical_range: Option<f32>,
-    pin_area_px: Option<&dyn Fn() -> f32>,
+    pin_area_px: Option<f32>,
     chains: &mut Vec<Vec<Marker>>,
 ) -> Vec<Marker> {
     let (fw, fh) = (frame.width(), frame.height());
@@ -371,7 +371,6 @@ fn detect_split_in(
         // candidate's centroid, when measured here, is used again below.
         let mut first_centroid = None;
         if let Some(pin_area_px) = pin_area_px.filter(|_| det.may_hold(guess)) {
-            let pin_area_px = pin_area_px();
             let blob = refine(frame, guess, det.radius_px, det.min_contrast);
             first_centroid = Some((guess, blob));
             let half_maximum = (lo + 0.5 * range).clamp(1.0, 255.0) as u8;
@@ -1127,11 +1126,8 @@ fn search_around(
     let mut searched: Vec<Marker> = Vec::new();
     let span = boxes.iter().fold([wx1, wy1, wx0, wy0], |a, b| union(&a, b));
     let mut taken = Occupancy::new(span);
-    // A followed pin's effective area (a blob of two is twice that),
-    // measured when a clipped candidate first needs it.
-    let areas_px: Vec<f32> = list.iter().map(|m| m.area_px).collect();
-    let pin_area = std::cell::OnceCell::new();
-    let pin_area_px = || *pin_area.get_or_init(|| percentile(areas_px.clone(), 0.5));
+    // A followed pin's effective area (a blob of two is twice that).
+    let pin_area_px = percentile(list.iter().map(|m| m.area_px).collect(), 0.5);
     let mut chains: Vec<Vec<Marker>> = Vec::new();
     for b in boxes {
         let found = detect_split_in(
@@ -1139,7 +1135,7 @@ fn search_around(
             det,
             b,
             Some(typical_range),
-            Some(&pin_area_px),
+            Some(pin_area_px),
             &mut chains,
         );
         for m in found {
@@ -1495,7 +1491,7 @@ fn split_chain(
     }
     let diameter_px = 2.0 * (pin_area_px as f64 / std::f64::consts::PI).sqrt();
     let reach = (2.0 * diameter_px) as usize + 2;
-    if !chord_says_chain(frame, at, level, diameter_px) {
+    if !chord_says_chain(frame, (sx, sy), level, diameter_px, reach) {
         return None;
     }
     let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
@@ -1593,18 +1589,24 @@ fn split_chain(
     )
 }
 
-/// Whether the chords through `at` (the pixels at or above `level`, along
-/// four directions) may cross a chain of pins of `diameter_px`: most
+/// Whether the chords through pixel `at` (the pixels at or above `level`,
+/// along four directions, each way at most `reach` px) may cross a chain
+/// of pins of `diameter_px`: most
 /// candidates are one pin. A chord along the nearest of the four
 /// directions to a chain's axis crosses two touching pins over at least
 /// 1.85 diameters (3.7 radii at 22.5 degrees), one pin over one, and the
 /// chord across it (through the neck) is much shorter
 /// ([`CHAIN_MIN_CHORD`], [`CHAIN_CHORD_RATIO`]).
-fn chord_says_chain(frame: &GreyFrame, at: PointPx, level: u8, diameter_px: f64) -> bool {
+fn chord_says_chain(
+    frame: &GreyFrame,
+    (sx, sy): (usize, usize),
+    level: u8,
+    diameter_px: f64,
+    reach: usize,
+) -> bool {
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let data = frame.data();
-    let (sx, sy) = ((at.x + 0.5) as i64, (at.y + 0.5) as i64);
-    let reach = (2.0 * diameter_px) as i64 + 2;
+    let (sx, sy, reach) = (sx as i64, sy as i64, reach as i64);
     let chords_px = [(1, 0), (0, 1), (1, 1), (1, -1)].map(|(dx, dy): (i64, i64)| {
         let run = |sign: i64| {
             (1..=reach)
