@@ -89,8 +89,9 @@ pub struct Calibration {
     pub gaps_px: Vec<PointPx>,
     /// The rest markers' rivals for following
     /// ([`markers::Rivals::new`] of `rest_markers` at
-    /// [`crate::pipeline::FOLLOW_REACH_PITCH`] pitches; computed again
-    /// whenever `rest_markers` change).
+    /// [`crate::pipeline::FOLLOW_REACH_PITCH`] pitches, each also
+    /// travelling along its path in `blur`; computed again whenever
+    /// `rest_markers` or `blur` change).
     pub rivals: markers::Rivals,
     /// Where blur puts the rest markers' centroids
     /// ([`markers::BlurLevels::measure`] on the first rest frame; computed
@@ -149,6 +150,7 @@ impl Calibration {
             contrast: &self.rest_contrast,
             gaps_px: &self.gaps_px,
             rivals: Some(&self.rivals),
+            blur: Some(&self.blur),
         }
     }
 
@@ -212,12 +214,12 @@ pub fn calibrate_mapped(
         });
     }
     (cal.rest_markers, cal.centroid_radii_px) = settled.into_iter().unzip();
-    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px);
     (cal.rest_density, cal.mask, cal.rest_median_per_mm2) =
         reference(&cal.rest_markers, &cal.density, &cal.detector);
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
     cal.blur = blur_levels(first, &cal);
+    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
     Ok(cal)
 }
 
@@ -469,6 +471,7 @@ pub fn calibrate_from_frames(
     let mut cal = finish(&median, detector, stable, given, params, map)?;
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.blur = blur_levels(&median, &cal);
+    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
     Ok(cal)
 }
 
@@ -539,7 +542,7 @@ fn finish(
     };
     let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
-    let rivals = rivals(&rest_markers, pitch_px);
+    let rivals = rivals(&rest_markers, pitch_px, &markers::BlurLevels::default());
     Ok(Calibration {
         width: w,
         height: h,
@@ -559,9 +562,17 @@ fn finish(
     })
 }
 
-/// The rivals of `rest_markers` for the pipeline's follow reach.
-fn rivals(rest_markers: &[PointPx], pitch_px: f64) -> markers::Rivals {
-    markers::Rivals::new(rest_markers, crate::pipeline::FOLLOW_REACH_PITCH * pitch_px)
+/// The rivals of `rest_markers` for the pipeline's follow reach, each
+/// travelling along its path in `blur`.
+fn rivals(rest_markers: &[PointPx], pitch_px: f64, blur: &markers::BlurLevels) -> markers::Rivals {
+    let travel_px: Vec<f64> = (0..rest_markers.len())
+        .map(|k| blur.path(k).map_or(0.0, |p| p.length_px()))
+        .collect();
+    markers::Rivals::new(
+        rest_markers,
+        crate::pipeline::FOLLOW_REACH_PITCH * pitch_px,
+        &travel_px,
+    )
 }
 
 /// Where blur puts `cal`'s rest markers on `rest`: followed within half a

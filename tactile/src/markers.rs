@@ -517,6 +517,7 @@ pub fn follow(
         contrast,
         gaps_px: &[],
         rivals: None,
+        blur: None,
     };
     let list = follow_each(frame, det, &rest, true, reach_px, max_lost)?;
     Some(Markers {
@@ -544,6 +545,7 @@ pub fn follow_all(
         contrast: &[],
         gaps_px: &[],
         rivals: None,
+        blur: None,
     };
     follow_each(frame, det, &rest, false, reach_px, usize::MAX)
         .unwrap_or_else(|| vec![None; near.len()])
@@ -588,12 +590,16 @@ pub struct Reference<'a> {
     /// The rest markers' [`Rivals`] (without them, or for a wider reach,
     /// following tests for two markers in one blob on a grid).
     pub rivals: Option<&'a Rivals>,
+    /// Where blur moves each rest marker's centroid ([`BlurLevels`]): a
+    /// followed marker may also lie within the reach of its path.
+    pub blur: Option<&'a BlurLevels>,
 }
 
 /// Per rest marker, the earlier rest markers (lower index) whose followed
 /// markers could run into the same blob as its own: rest places within
 /// `2 reach + DUPLICATE_PX` of each other, for a follow reach up to
-/// `reach_px`. Computed once at calibration: a frame's test for two
+/// `reach_px`, plus how far beyond it each may travel (along its
+/// [`BlurPath`]). Computed once at calibration: a frame's test for two
 /// followed markers in one blob then looks at those few (none, on most
 /// lattices) instead of clearing and filling a frame-sized grid (whose
 /// claims took 0.02-0.03 ms of a frame on the other renderer's domes,
@@ -607,15 +613,25 @@ pub struct Rivals {
 }
 
 impl Rivals {
-    /// The rivals among `near` for a follow reach of `reach_px`.
-    pub fn new(near: &[PointPx], reach_px: f64) -> Self {
+    /// The rivals among `near` for a follow reach of `reach_px`, each of
+    /// them able to travel `travel_px` further (0 past the slice's end).
+    pub fn new(near: &[PointPx], reach_px: f64, travel_px: &[f64]) -> Self {
+        let travel = |k: usize| {
+            travel_px
+                .get(k)
+                .copied()
+                .filter(|t| t.is_finite())
+                .unwrap_or(0.0)
+                .max(0.0)
+        };
         let within_px = 2.0 * reach_px.max(0.0) + DUPLICATE_PX;
-        let index = PointIndex::spanning(near, within_px);
+        let most_px = within_px + 2.0 * (0..near.len()).map(travel).fold(0.0, f64::max);
+        let index = PointIndex::spanning(near, most_px);
         let earlier = (0..near.len())
             .map(|k| {
                 let mut e: Vec<u32> = index
-                    .within(near, near[k], within_px)
-                    .filter(|&(n, _)| n < k)
+                    .within(near, near[k], most_px)
+                    .filter(|&(n, d2)| n < k && d2.sqrt() <= within_px + travel(n) + travel(k))
                     .map(|(n, _)| n as u32)
                     .collect();
                 e.sort_unstable();
@@ -699,6 +715,46 @@ pub struct BlurLevels {
     pub gauge_shift_px: Vec<Vec<PointPx>>,
 }
 
+/// Where blur moves one rest marker's centroid: its shifts at each of
+/// [`BLUR_LEVELS_PX`], from its rest place (none at no added blur).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BlurPath {
+    at: [PointPx; BLUR_LEVELS_PX.len()],
+}
+
+impl BlurPath {
+    /// True when `off` (from the rest place) lies within `reach_px` of the
+    /// path: the segments from no shift through each level's.
+    pub fn within(&self, off: PointPx, reach_px: f64) -> bool {
+        let mut from = PointPx::default();
+        self.at.iter().any(|&to| {
+            let (dx, dy) = (to.x - from.x, to.y - from.y);
+            let len2 = dx * dx + dy * dy;
+            let t = if len2 > 0.0 {
+                (((off.x - from.x) * dx + (off.y - from.y) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let (ex, ey) = (off.x - from.x - t * dx, off.y - from.y - t * dy);
+            from = to;
+            ex * ex + ey * ey <= reach_px * reach_px
+        })
+    }
+
+    /// The path's length, px.
+    pub fn length_px(&self) -> f64 {
+        let mut from = PointPx::default();
+        self.at
+            .iter()
+            .map(|&to| {
+                let d = (to.x - from.x).hypot(to.y - from.y);
+                from = to;
+                d
+            })
+            .sum()
+    }
+}
+
 impl BlurLevels {
     /// Follows the rest markers `at` (each in its window of `radii_px`, or
     /// the detector's past its end, within `reach_px`) on `rest` blurred by
@@ -719,7 +775,7 @@ impl BlurLevels {
                     .enumerate()
                     .map(|(k, &p)| {
                         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
-                        follow_one(&blurred, p, radius_px, det.min_contrast, reach_px)
+                        follow_one(&blurred, p, radius_px, det.min_contrast, reach_px, None)
                             .map_or(PointPx::default(), |(c, _, _)| {
                                 PointPx::new(c.x - p.x, c.y - p.y)
                             })
@@ -728,6 +784,19 @@ impl BlurLevels {
             })
             .collect();
         Self::from_shifts(shift_px)
+    }
+
+    /// Rest marker `k`'s shifts at the levels, from the sharpest (`None`
+    /// without levels, or past the last marker).
+    pub fn path(&self, k: usize) -> Option<BlurPath> {
+        let mut at = [PointPx::default(); BLUR_LEVELS_PX.len()];
+        if self.shift_px.len() != at.len() {
+            return None;
+        }
+        for (a, level) in at.iter_mut().zip(&self.shift_px) {
+            *a = *level.get(k)?;
+        }
+        Some(BlurPath { at })
     }
 
     /// The levels of `shift_px` (per level of [`BLUR_LEVELS_PX`], per rest
@@ -1159,7 +1228,7 @@ fn search_around(
                 let k = list[j].followed_from.unwrap_or(usize::MAX);
                 let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
                 if let Some((pos, contrast, area_px)) =
-                    follow_one(frame, p, radius_px, det.min_contrast, same_px)
+                    follow_one(frame, p, radius_px, det.min_contrast, same_px, None)
                 {
                     let m = &mut list[j];
                     m.rel_strength *= contrast / m.strength.max(1.0);
@@ -1229,7 +1298,7 @@ fn search_around(
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
         if radius_px < det.radius_px {
             if let Some((pos, _, area_px)) =
-                follow_one(frame, m.pos, radius_px, det.min_contrast, same_px)
+                follow_one(frame, m.pos, radius_px, det.min_contrast, same_px, None)
             {
                 (m.pos, m.area_px) = (pos, area_px);
             }
@@ -1241,20 +1310,33 @@ fn search_around(
 
 /// The half-maximum centroid of the blob at `start`, re-centred until it
 /// settles (at most [`FOLLOW_PASSES`] windows): position, contrast, area;
-/// `None` as soon as a centroid lies further than `reach_px` from `start`.
+/// `None` as soon as a centroid lies further than `reach_px` from `start`
+/// and from the path blur moves rest marker `k` along (`path`: the levels
+/// and `k`; [`BlurLevels::path`]). A frame blurrier than the rest moves a
+/// crowded marker's centroid towards its neighbours (a dome's outer ring
+/// towards the ring inside it, by 3-4 px at 3 px more blur on the other
+/// renderer's dome, beyond the reach of 0.3 pitch); the calibration
+/// measured how far.
 fn follow_one(
     frame: &GreyFrame,
     start: PointPx,
     radius_px: f64,
     min_contrast: f32,
     reach_px: f64,
+    path: Option<(&BlurLevels, usize)>,
 ) -> Option<(PointPx, f32, f32)> {
     let mut at = start;
     let mut hit = None;
     for _ in 0..FOLLOW_PASSES {
         let (c, contrast, area) = refine(frame, at, radius_px, min_contrast)?;
-        // Beyond the reach the marker is lost: no more passes.
-        if (c.x - start.x).powi(2) + (c.y - start.y).powi(2) > reach_px * reach_px {
+        // Beyond the reach (of its start, or of the path blur moves it
+        // along) the marker is lost: no more passes.
+        let off = PointPx::new(c.x - start.x, c.y - start.y);
+        if off.x * off.x + off.y * off.y > reach_px * reach_px
+            && path
+                .and_then(|(levels, k)| levels.path(k))
+                .is_none_or(|p| !p.within(off, reach_px))
+        {
             return None;
         }
         let step2 = (c.x - at.x).powi(2) + (c.y - at.y).powi(2);
@@ -1291,7 +1373,8 @@ fn follow_each(
     let mut found: Vec<Option<(PointPx, f32, f32)>> = Vec::with_capacity(near.len());
     for (k, &p) in near.iter().enumerate() {
         let radius_px = radii_px.get(k).copied().unwrap_or(det.radius_px);
-        let kept = follow_one(frame, p, radius_px, det.min_contrast, reach_px)
+        let path = rest.blur.map(|levels| (levels, k));
+        let kept = follow_one(frame, p, radius_px, det.min_contrast, reach_px, path)
             .filter(|&(at, _, _)| det.may_hold(at));
         if kept.is_none() {
             lost += 1;
@@ -3219,7 +3302,7 @@ mod tests {
             .map(|p| PointPx::new(p.x + 1.5, p.y))
             .collect();
         near.extend(&doubles);
-        let rivals = Rivals::new(&near, reach);
+        let rivals = Rivals::new(&near, reach, &[]);
         assert!(rivals.covers(near.len(), reach) && !rivals.covers(near.len(), 2.0 * reach));
         let follow = |rivals| {
             let rest_ref = Reference {
@@ -3228,6 +3311,7 @@ mod tests {
                 contrast: &[],
                 gaps_px: &[],
                 rivals,
+                blur: None,
             };
             follow_each(
                 &rest.image,

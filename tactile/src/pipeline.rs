@@ -539,6 +539,40 @@ mod tests {
     }
 
     #[test]
+    fn a_dome_three_px_blurrier_than_the_rest_keeps_its_outer_ring() {
+        // At 3 px more blur the dome's outer ring runs into the ring inside
+        // it: each outer centroid moves inwards by more than the follow
+        // reach, along the path the calibration's blurred rests measured.
+        let params = Params::default();
+        let sensor = Category::Dome.sensor(640, 480, 5);
+        let rest = synth::rest_frame(&sensor, 99);
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
+        let blurred = synth::rest_frame(&sensor, 7).image.blurred(3.0);
+        let run = |cal: &Calibration| {
+            let r = Pipeline::new(cal.clone(), params.clone())
+                .run(&blurred)
+                .unwrap();
+            (r.markers.len(), r.contact)
+        };
+        let n = cal.rest_markers.len();
+        let (found, contact) = run(&cal);
+        assert!(
+            found.abs_diff(n) as f64 <= 0.01 * n as f64,
+            "{found} markers of {n}"
+        );
+        assert!(contact.is_none());
+        // Without the paths (levels measured, reach as at rest) the ring is
+        // lost.
+        let mut no_paths = cal.clone();
+        no_paths.blur.shift_px.clear();
+        let (without, _) = run(&no_paths);
+        assert!(
+            without.abs_diff(n) as f64 > 0.01 * n as f64,
+            "{without} of {n}"
+        );
+    }
+
+    #[test]
     fn wrong_frame_size_is_an_error() {
         let params = Params::default();
         let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
