@@ -93,6 +93,9 @@ pub struct Calibration {
     /// travelling along its path in `blur`; computed again whenever
     /// `rest_markers` or `blur` change).
     pub rivals: markers::Rivals,
+    /// Each rest marker's neighbours ([`markers::Neighbours::new`] of
+    /// `rest_markers`; computed again whenever they change).
+    pub neighbours: markers::Neighbours,
     /// Where blur puts the rest markers' centroids
     /// ([`markers::BlurLevels::measure`] on the first rest frame; computed
     /// again whenever `rest_markers` change).
@@ -151,6 +154,7 @@ impl Calibration {
             gaps_px: &self.gaps_px,
             rivals: Some(&self.rivals),
             blur: Some(&self.blur),
+            neighbours: Some(&self.neighbours),
         }
     }
 
@@ -220,6 +224,7 @@ pub fn calibrate_mapped(
     cal.rest_contrast = rest_contrast(rest, &cal);
     cal.blur = blur_levels(first, &cal);
     cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
+    cal.neighbours = markers::Neighbours::new(&cal.rest_markers, cal.pitch_px);
     Ok(cal)
 }
 
@@ -472,6 +477,7 @@ pub fn calibrate_from_frames(
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.blur = blur_levels(&median, &cal);
     cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
+    cal.neighbours = markers::Neighbours::new(&cal.rest_markers, cal.pitch_px);
     Ok(cal)
 }
 
@@ -543,6 +549,7 @@ fn finish(
     let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
     let rivals = rivals(&rest_markers, pitch_px, &markers::BlurLevels::default());
+    let neighbours = markers::Neighbours::new(&rest_markers, pitch_px);
     Ok(Calibration {
         width: w,
         height: h,
@@ -558,6 +565,7 @@ fn finish(
         rest_contrast: Vec::new(),
         gaps_px: Vec::new(),
         rivals,
+        neighbours,
         blur: markers::BlurLevels::default(),
     })
 }

@@ -15,7 +15,8 @@
 //!
 //! With [`CentreMethod::Hybrid`] the centre comes from the tracked markers
 //! around the region ([`crate::tracking::radial_centre_on`], in the chart of
-//! a domed skin, [`crate::surface`]) when that fit is consistent, and
+//! a domed skin, [`crate::surface`]; those displaced by at most
+//! [`FIT_MAX_MOVE_PITCH`]) when that fit is consistent, and
 //! contacts too small to dent the density (width below ~h) are found from
 //! the tracked markers alone, and so are wide contacts too shallow to dent
 //! it (a flat punch pressed a little: a ring of moved markers around a still
@@ -463,7 +464,11 @@ pub fn locate(
         (CentreMethod::Hybrid, Some(r)) => {
             let radius_px = (r.area_mm2 / std::f64::consts::PI).sqrt() / mm_per_px;
             let reach = radius_px + 2.0 * pitch_px;
-            let near = near_markers(rest, field, r.centre, reach);
+            let mut near = near_markers(rest, field, r.centre, reach);
+            near.retain(|&n| {
+                field.displacement[n]
+                    .is_none_or(|u| u.x.hypot(u.y) <= FIT_MAX_MOVE_PITCH * pitch_px)
+            });
             match tracking::radial_centre_on(surface, rest, field, &near, field.moved_px, 0.0) {
                 Some(fit)
                     if fit.n_inliers >= params.min_moved_markers
@@ -494,6 +499,14 @@ pub fn locate(
         }
     }
 }
+
+/// The tracked centre of a density region is fitted from the markers
+/// displaced by at most this many pitches. Beyond it a marker was paired
+/// through its neighbours' displacements ([`crate::markers::NEIGHBOUR_PITCH`]):
+/// right more often than not, but on the other renderer's frames, where
+/// pressed pins' parallax bends the lines, fitting them too moved the centre
+/// (flat skin frame 20: 2.5 -> 10.3 px; BENCHMARKS.md, session 19).
+pub const FIT_MAX_MOVE_PITCH: f64 = 0.5;
 
 /// A tracked marker counts as support of a small contact when its
 /// displacement exceeds this many sigmas of the frame's jitter (below the

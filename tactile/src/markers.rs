@@ -518,6 +518,7 @@ pub fn follow(
         gaps_px: &[],
         rivals: None,
         blur: None,
+        neighbours: None,
     };
     let list = follow_each(frame, det, &rest, true, reach_px, max_lost)?;
     Some(Markers {
@@ -546,6 +547,7 @@ pub fn follow_all(
         gaps_px: &[],
         rivals: None,
         blur: None,
+        neighbours: None,
     };
     follow_each(frame, det, &rest, false, reach_px, usize::MAX)
         .unwrap_or_else(|| vec![None; near.len()])
@@ -593,6 +595,52 @@ pub struct Reference<'a> {
     /// Where blur moves each rest marker's centroid ([`BlurLevels`]): a
     /// followed marker may also lie within the reach of its path.
     pub blur: Option<&'a BlurLevels>,
+    /// Each rest marker's [`Neighbours`] (without them, the local search
+    /// finds them itself).
+    pub neighbours: Option<&'a Neighbours>,
+}
+
+/// Per rest marker, the other rest markers within [`NEIGHBOUR_PITCH`]
+/// pitches: whose displacements predict its place when the local search
+/// pairs it ([`follow_or_search`]). Computed once at calibration.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Neighbours {
+    starts: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Neighbours {
+    /// The neighbours among `near`, a pitch of `pitch_px` apart.
+    pub fn new(near: &[PointPx], pitch_px: f64) -> Self {
+        let within_px = NEIGHBOUR_PITCH * pitch_px.max(0.0);
+        let index = PointIndex::spanning(near, within_px);
+        let mut starts = Vec::with_capacity(near.len() + 1);
+        let mut items = Vec::new();
+        starts.push(0);
+        for (k, &p) in near.iter().enumerate() {
+            items.extend(
+                index
+                    .within(near, p, within_px)
+                    .filter(|&(n, _)| n != k)
+                    .map(|(n, _)| n as u32),
+            );
+            starts.push(items.len() as u32);
+        }
+        Self { starts, items }
+    }
+
+    /// Rest marker `k`'s neighbours (none past the lists' end).
+    pub fn of(&self, k: usize) -> &[u32] {
+        match (self.starts.get(k), self.starts.get(k + 1)) {
+            (Some(&a), Some(&b)) => &self.items[a as usize..b as usize],
+            _ => &[],
+        }
+    }
+
+    /// Whether the lists are for `n` rest markers.
+    fn covers(&self, n: usize) -> bool {
+        self.starts.len() == n + 1
+    }
 }
 
 /// Per rest marker, the earlier rest markers (lower index) whose followed
@@ -1085,7 +1133,9 @@ fn outline_roughness(
 /// marker confirms is dropped (it settled between two blobs). Each
 /// searched marker that is not a followed one is given the nearest lost
 /// rest marker within half a pitch ([`Marker::followed_from`]), nearest
-/// pairs first. `None` when the boxes cover more than [`LOCAL_MAX_AREA`]
+/// pairs first; one further from every lost rest place, the lost rest
+/// marker whose place its neighbours' displacements predict within half a
+/// pitch ([`NEIGHBOUR_PITCH`], [`PAIR_ROUNDS`]). `None` when the boxes cover more than [`LOCAL_MAX_AREA`]
 /// of the search window. `frame` has bright markers ([`positive`]).
 fn search_around(
     frame: &GreyFrame,
@@ -1266,31 +1316,20 @@ fn search_around(
         !unconfirmed.get(j - 1).copied().unwrap_or(false)
     });
     // Each searched marker is the nearest lost rest marker's within half a
-    // pitch (nearest pairs first, each once).
+    // pitch (nearest pairs first, each once). Then the ones a press moved
+    // further: a lost rest marker's place is predicted from its paired
+    // neighbours' displacements ([`predicted`]), and the searched markers
+    // beyond half a pitch of their rest places are paired with the
+    // predictions, in at most [`PAIR_ROUNDS`] rounds (each round's pairs
+    // predict the next).
     let mut lost = vec![true; near.len()];
     for k in list.iter().filter_map(|m| m.followed_from) {
         if let Some(l) = lost.get_mut(k) {
             *l = false;
         }
     }
-    let lost_ids: Vec<usize> = (0..near.len()).filter(|&k| lost[k]).collect();
-    let lost_at: Vec<PointPx> = lost_ids.iter().map(|&k| near[k]).collect();
-    let reach_px = 0.5 * pitch_px;
-    let lost_index = PointIndex::new(&lost_at, fw, fh, reach_px);
-    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
-    for (j, m) in searched.iter().enumerate() {
-        pairs.extend(
-            lost_index
-                .within(&lost_at, m.pos, reach_px)
-                .map(|(i, d2)| (d2, j, lost_ids[i])),
-        );
-    }
-    pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-    for (_, j, k) in pairs {
+    let pair = |searched: &mut [Marker], lost: &mut [bool], k: usize, j: usize| {
         let m = &mut searched[j];
-        if !lost[k] || m.followed_from.is_some() {
-            continue;
-        }
         lost[k] = false;
         m.followed_from = Some(k);
         // The search's centroid window is the detector's; a marker with a
@@ -1303,9 +1342,164 @@ fn search_around(
                 (m.pos, m.area_px) = (pos, area_px);
             }
         }
+    };
+    let reach_px = 0.5 * pitch_px;
+    let lost_ids: Vec<usize> = (0..near.len()).filter(|&k| lost[k]).collect();
+    let lost_at: Vec<PointPx> = lost_ids.iter().map(|&k| near[k]).collect();
+    for (_, j, k) in nearest_pairs(&searched, &lost_at, &lost_ids, reach_px, fw, fh) {
+        if lost[k] && searched[j].followed_from.is_none() {
+            pair(&mut searched, &mut lost, k, j);
+        }
+    }
+    if lost.iter().any(|&l| l) && searched.iter().any(|m| m.followed_from.is_none()) {
+        let mut displaced: Vec<Option<PointPx>> = vec![None; near.len()];
+        for m in list.iter().chain(&searched) {
+            if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
+                displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
+            }
+        }
+        let own;
+        let neighbours = match rest.neighbours.filter(|n| n.covers(near.len())) {
+            Some(n) => n,
+            None => {
+                own = Neighbours::new(near, pitch_px);
+                &own
+            }
+        };
+        let within_px = NEIGHBOUR_PITCH * pitch_px;
+        // The searched markers the rest places left unpaired (few: those a
+        // press moved furthest), indexed.
+        let free: Vec<usize> = (0..searched.len())
+            .filter(|&j| searched[j].followed_from.is_none())
+            .collect();
+        let at: Vec<PointPx> = free.iter().map(|&j| searched[j].pos).collect();
+        let free_index = PointIndex::new(&at, fw, fh, within_px);
+        // Lost rest markers whose prediction may pair: all at first, then
+        // the neighbours of the last round's pairs.
+        let mut look: Vec<usize> = (0..near.len()).filter(|&k| lost[k]).collect();
+        for _ in 0..PAIR_ROUNDS {
+            let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+            let mut near_k: Vec<usize> = Vec::new();
+            for &k in look.iter().filter(|&&k| lost[k]) {
+                // The searched markers still unpaired near it, but beyond
+                // half a pitch of its rest place, against its prediction.
+                near_k.clear();
+                near_k.extend(
+                    free_index
+                        .within(&at, near[k], within_px)
+                        .filter(|&(i, d2)| {
+                            searched[free[i]].followed_from.is_none() && d2 > reach_px * reach_px
+                        })
+                        .map(|(i, _)| i),
+                );
+                if near_k.is_empty() {
+                    continue;
+                }
+                let q = predicted(near, &displaced, neighbours.of(k), k);
+                for &i in &near_k {
+                    let e2 = (q.x - at[i].x).powi(2) + (q.y - at[i].y).powi(2);
+                    if e2 <= reach_px * reach_px {
+                        pairs.push((e2, free[i], k));
+                    }
+                }
+            }
+            pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            look.clear();
+            for (_, j, k) in pairs {
+                if lost[k] && searched[j].followed_from.is_none() {
+                    pair(&mut searched, &mut lost, k, j);
+                    let p = searched[j].pos;
+                    displaced[k] = Some(PointPx::new(p.x - near[k].x, p.y - near[k].y));
+                    look.extend(
+                        neighbours
+                            .of(k)
+                            .iter()
+                            .map(|&n| n as usize)
+                            .filter(|&n| lost[n]),
+                    );
+                }
+            }
+            if look.is_empty() {
+                break;
+            }
+            look.sort_unstable();
+            look.dedup();
+        }
     }
     list.append(&mut searched);
     Some(list)
+}
+
+/// Rest markers this many pitches apart are neighbours: the displacements
+/// of a lost one's paired neighbours predict its place (the local search
+/// of [`follow_or_search`]).
+pub const NEIGHBOUR_PITCH: f64 = 1.6;
+/// Rounds of pairing searched markers with the predicted places of lost
+/// rest markers ([`NEIGHBOUR_PITCH`]); each round's pairs predict the next.
+pub const PAIR_ROUNDS: usize = 3;
+
+/// The pairs `(squared distance, searched index, rest index)` of the
+/// searched markers and the places `at` (of rest markers `ids`) within
+/// `reach_px` of each other, nearest first.
+fn nearest_pairs(
+    searched: &[Marker],
+    at: &[PointPx],
+    ids: &[usize],
+    reach_px: f64,
+    width: usize,
+    height: usize,
+) -> Vec<(f64, usize, usize)> {
+    let index = PointIndex::new(at, width, height, reach_px);
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (j, m) in searched
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| m.followed_from.is_none())
+    {
+        pairs.extend(
+            index
+                .within(at, m.pos, reach_px)
+                .map(|(i, d2)| (d2, j, ids[i])),
+        );
+    }
+    pairs.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    pairs
+}
+
+/// Where rest marker `k` is expected: its rest place moved by the median
+/// (per axis) of the displacements in `displaced` of its `neighbours`
+/// (those that have one), or its rest place with fewer than two.
+fn predicted(
+    near: &[PointPx],
+    displaced: &[Option<PointPx>],
+    neighbours: &[u32],
+    k: usize,
+) -> PointPx {
+    const MOST: usize = 32;
+    let (mut ux, mut uy, mut n) = ([0.0f64; MOST], [0.0f64; MOST], 0);
+    for &j in neighbours {
+        if let Some(u) = displaced.get(j as usize).copied().flatten() {
+            if n < MOST {
+                (ux[n], uy[n]) = (u.x, u.y);
+                n += 1;
+            }
+        }
+    }
+    if n < 2 {
+        return near[k];
+    }
+    let median = |v: &mut [f64]| {
+        v.sort_unstable_by(f64::total_cmp);
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    };
+    PointPx::new(
+        near[k].x + median(&mut ux[..n]),
+        near[k].y + median(&mut uy[..n]),
+    )
 }
 
 /// The half-maximum centroid of the blob at `start`, re-centred until it
@@ -3312,6 +3506,7 @@ mod tests {
                 gaps_px: &[],
                 rivals,
                 blur: None,
+                neighbours: None,
             };
             follow_each(
                 &rest.image,
