@@ -1135,8 +1135,9 @@ fn outline_roughness(
 /// rest marker within half a pitch ([`Marker::followed_from`]), nearest
 /// pairs first; one further from every lost rest place, the lost rest
 /// marker whose place its neighbours' displacements predict within half a
-/// pitch ([`NEIGHBOUR_PITCH`], [`PAIR_ROUNDS`]). `None` when the boxes cover more than [`LOCAL_MAX_AREA`]
-/// of the search window. `frame` has bright markers ([`positive`]).
+/// pitch ([`NEIGHBOUR_PITCH`], [`PAIR_ROUNDS`]). `None` when the boxes
+/// cover more than [`LOCAL_MAX_AREA`] of the search window. `frame` has
+/// bright markers ([`positive`]).
 fn search_around(
     frame: &GreyFrame,
     det: &Detector,

@@ -495,16 +495,23 @@ mod tests {
         send_sync::<FrameResult>();
     }
 
+    /// The generator's dome calibrated on one rest frame, and another rest
+    /// frame (other noise) `blur_px` blurrier.
+    fn dome_and_blurrier(blur_px: f64) -> (Params, GreyFrame, Calibration, GreyFrame) {
+        let params = Params::default();
+        let sensor = Category::Dome.sensor(640, 480, 5);
+        let rest = synth::rest_frame(&sensor, 99).image;
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest), &params).unwrap();
+        let blurred = synth::rest_frame(&sensor, 7).image.blurred(blur_px);
+        (params, rest, cal, blurred)
+    }
+
     #[test]
     fn a_frame_blurrier_than_the_rest_has_its_blur_taken_off_the_field() {
         // The dome's outer rings are crowded: in a frame 1.8 px blurrier
         // than the rest (another rest frame: other noise), their centroid
         // windows take in their neighbours' blobs.
-        let params = Params::default();
-        let sensor = Category::Dome.sensor(640, 480, 5);
-        let rest = synth::rest_frame(&sensor, 99);
-        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
-        let blurred = synth::rest_frame(&sensor, 7).image.blurred(1.8);
+        let (params, rest, cal, blurred) = dome_and_blurrier(1.8);
         let run = |cal: &Calibration, frame: &GreyFrame| {
             let r = Pipeline::new(cal.clone(), params.clone())
                 .run(frame)
@@ -535,7 +542,7 @@ mod tests {
         );
         assert!(contact.is_none());
         // The rest itself is as sharp as the rest.
-        assert_eq!(run(&cal, &rest.image).0, None);
+        assert_eq!(run(&cal, &rest).0, None);
     }
 
     #[test]
@@ -543,11 +550,7 @@ mod tests {
         // At 3 px more blur the dome's outer ring runs into the ring inside
         // it: each outer centroid moves inwards by more than the follow
         // reach, along the path the calibration's blurred rests measured.
-        let params = Params::default();
-        let sensor = Category::Dome.sensor(640, 480, 5);
-        let rest = synth::rest_frame(&sensor, 99);
-        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
-        let blurred = synth::rest_frame(&sensor, 7).image.blurred(3.0);
+        let (params, _, cal, blurred) = dome_and_blurrier(3.0);
         let run = |cal: &Calibration| {
             let r = Pipeline::new(cal.clone(), params.clone())
                 .run(&blurred)
