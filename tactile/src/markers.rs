@@ -1509,7 +1509,7 @@ fn predicted(
 /// and from the path blur moves rest marker `k` along (`path`: the levels
 /// and `k`; [`BlurLevels::path`]). A frame blurrier than the rest moves a
 /// crowded marker's centroid towards its neighbours (a dome's outer ring
-/// towards the ring inside it, by 3-4 px at 3 px more blur on the other
+/// towards the ring inside it, by 3.6-4.5 px at 3 px more blur on the other
 /// renderer's dome, beyond the reach of 0.3 pitch); the calibration
 /// measured how far.
 fn follow_one(
