@@ -2929,6 +2929,35 @@ mod tests {
             }
         }
 
+        /// A point is within reach of a blur path exactly when it is within
+        /// reach of the segment from the rest place to the last shift, for
+        /// a path that runs out along one line and then stays (away from
+        /// the boundary, where rounding decides).
+        #[test]
+        fn a_point_is_within_a_blur_path_when_it_is_near_its_segment(
+            sx in -6.0f64..6.0,
+            sy in -6.0f64..6.0,
+            reached in 0usize..BLUR_LEVELS_PX.len(),
+            ox in -12.0f64..12.0,
+            oy in -12.0f64..12.0,
+            reach_px in 0.5f64..5.0,
+        ) {
+            // Shifts growing along (sx, sy) up to level `reached`, then flat.
+            let mut at = [PointPx::default(); BLUR_LEVELS_PX.len()];
+            for (l, a) in at.iter_mut().enumerate() {
+                let f = (l.min(reached) + 1) as f64 / (reached + 1) as f64;
+                *a = PointPx::new(f * sx, f * sy);
+            }
+            let path = BlurPath { at };
+            let len2 = sx * sx + sy * sy;
+            let t = if len2 > 0.0 { ((ox * sx + oy * sy) / len2).clamp(0.0, 1.0) } else { 0.0 };
+            let d = (ox - t * sx).hypot(oy - t * sy);
+            proptest::prop_assume!((d - reach_px).abs() > 1e-6);
+            proptest::prop_assert_eq!(path.within(PointPx::new(ox, oy), reach_px), d <= reach_px);
+            let length = path.length_px();
+            proptest::prop_assert!((length - len2.sqrt()).abs() < 1e-9, "{} {}", length, len2.sqrt());
+        }
+
         /// The fixed-block moments are the plain ones, to the last bit, for
         /// every window up to 16 x 16, any 3x3 inside it and any contrast
         /// floor.
