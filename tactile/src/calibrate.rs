@@ -223,8 +223,7 @@ pub fn calibrate_mapped(
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.rest_contrast = rest_contrast(rest, &cal);
     cal.blur = blur_levels(first, &cal);
-    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
-    cal.neighbours = markers::Neighbours::new(&cal.rest_markers, cal.pitch_px);
+    link_rest(&mut cal);
     Ok(cal)
 }
 
@@ -476,8 +475,7 @@ pub fn calibrate_from_frames(
     let mut cal = finish(&median, detector, stable, given, params, map)?;
     cal.gaps_px = rest_gaps(&cal.rest_markers, cal.pitch_px, &cal.detector, w, h);
     cal.blur = blur_levels(&median, &cal);
-    cal.rivals = rivals(&cal.rest_markers, cal.pitch_px, &cal.blur);
-    cal.neighbours = markers::Neighbours::new(&cal.rest_markers, cal.pitch_px);
+    link_rest(&mut cal);
     Ok(cal)
 }
 
@@ -548,8 +546,6 @@ fn finish(
     };
     let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
-    let rivals = rivals(&rest_markers, pitch_px, &markers::BlurLevels::default());
-    let neighbours = markers::Neighbours::new(&rest_markers, pitch_px);
     Ok(Calibration {
         width: w,
         height: h,
@@ -564,23 +560,26 @@ fn finish(
         centroid_radii_px,
         rest_contrast: Vec::new(),
         gaps_px: Vec::new(),
-        rivals,
-        neighbours,
+        // Made by `link_rest` once the rest markers and their blur are final.
+        rivals: markers::Rivals::default(),
+        neighbours: markers::Neighbours::default(),
         blur: markers::BlurLevels::default(),
     })
 }
 
-/// The rivals of `rest_markers` for the pipeline's follow reach, each
-/// travelling along its path in `blur`.
-fn rivals(rest_markers: &[PointPx], pitch_px: f64, blur: &markers::BlurLevels) -> markers::Rivals {
-    let travel_px: Vec<f64> = (0..rest_markers.len())
-        .map(|k| blur.path(k).map_or(0.0, |p| p.length_px()))
+/// The lists following needs of `cal`'s rest markers, made once they and
+/// their blur levels are final: their rivals for the pipeline's follow
+/// reach, each travelling along its blur path, and their neighbours.
+fn link_rest(cal: &mut Calibration) {
+    let travel_px: Vec<f64> = (0..cal.rest_markers.len())
+        .map(|k| cal.blur.path(k).map_or(0.0, |p| p.length_px()))
         .collect();
-    markers::Rivals::new(
-        rest_markers,
-        crate::pipeline::FOLLOW_REACH_PITCH * pitch_px,
+    cal.rivals = markers::Rivals::new(
+        &cal.rest_markers,
+        crate::pipeline::FOLLOW_REACH_PITCH * cal.pitch_px,
         &travel_px,
-    )
+    );
+    cal.neighbours = markers::Neighbours::new(&cal.rest_markers, cal.pitch_px);
 }
 
 /// Where blur puts `cal`'s rest markers on `rest`: followed within half a
