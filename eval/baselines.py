@@ -95,6 +95,16 @@ OPENCV_PARAMS = {
                          filterByCircularity=True, minCircularity=0.3,
                          filterByInertia=True, minInertiaRatio=0.1,
                          filterByConvexity=True, minConvexity=0.6),
+    # GelSight Mini: dark dots (~12 px across, 100-125 px) on a colour-lit gel,
+    # the top row cut through the dots' centres. On rest.png it finds the 70
+    # full dots of the 80 of pins_ref.csv and none of the cut ones, with any
+    # area floor of 10-30 px and threshold step of 2-10 (2026-11-27).
+    "gelsight_mini": dict(minThreshold=20, maxThreshold=230, thresholdStep=5,
+                          filterByColor=True, blobColor=0,
+                          filterByArea=True, minArea=20, maxArea=300,
+                          filterByCircularity=True, minCircularity=0.3,
+                          filterByInertia=True, minInertiaRatio=0.1,
+                          filterByConvexity=True, minConvexity=0.6),
 }
 # eval/raw_taps.py moves tactip_raw's own pixels: the same detector.
 OPENCV_PARAMS["tactip_raw_taps"] = OPENCV_PARAMS["tactip_raw_taps_light"] = OPENCV_PARAMS["tactip_raw"]
@@ -115,6 +125,10 @@ DOH_PARAMS = {
     # 261 dots are found (47 markers off a dot, 88 second markers on a dot;
     # 2026-11-23 run); 0.002 has no off-dot markers but finds ~146.
     "gelslim_dots": dict(min_sigma=2.0, max_sigma=4.0, num_sigma=5, threshold=0.0016),
+    # GelSight Mini dots (radius ~6 px): sigmas 4-6; 0.0008 finds 79 on
+    # rest.png, 78 of the 80 dots (0.001: 76; sigma 3-6 also finds the gel's
+    # texture, 387-525 blobs; 2026-11-27).
+    "gelsight_mini": dict(min_sigma=4.0, max_sigma=6.0, num_sigma=5, threshold=0.0008),
 }
 DOH_PARAMS["tactip_raw_taps"] = DOH_PARAMS["tactip_raw_taps_light"] = DOH_PARAMS["tactip_raw"]
 

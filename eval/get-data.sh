@@ -9,8 +9,8 @@
 # --seed S (default 0). DEXITAC_EVAL_GIT_BASE overrides https://github.com
 # (for a local copy, e.g. file:///srv/git).
 #
-# The data sets carry no licence: everything stays under data/ (git-ignored),
-# never commit a frame.
+# The data sets carry no licence (gsrobotics is GPL-3.0): everything stays
+# under data/ (git-ignored), never commit a frame.
 set -euo pipefail
 shopt -s inherit_errexit
 
@@ -34,6 +34,9 @@ base=${DEXITAC_EVAL_GIT_BASE:-https://github.com}
 SHEAR=dexterousrobot/tactile_data_shear
 TIP=dexterousrobot/tactile_image_processing
 GELSLIM=siyuandong16/gelsight_heightmap_reconstruction
+GSROBOTICS=gelsightinc/gsrobotics
+# The commit that added the GelSight Mini marker video (later ones removed it).
+GS_MINI_COMMIT=3d1bed69c56d2970d5901a845fdcb3c8da7e9415
 
 # clone REPO PATH... : a depth-1, blob-less clone checking out only PATHs.
 clone() {
@@ -51,6 +54,20 @@ clone() {
   echo "$dir"
 }
 
+# clone_at REPO COMMIT PATH : a blob-less clone with PATH checked out at
+# COMMIT (not at the tip: the file is gone there), only its blobs fetched.
+clone_at() {
+  local repo=$1 commit=$2 path=$3
+  local dir=data/src/${repo//\//+}
+  if [[ ! -d $dir/.git ]]; then
+    mkdir -p data/src
+    git clone --quiet --filter=blob:none --no-checkout "$base/$repo" "$dir" || return 1
+  fi
+  printf '/%s\n' "$path" | git -C "$dir" sparse-checkout set --no-cone --stdin || return 1
+  git -C "$dir" checkout --quiet "$commit" || return 1
+  echo "$dir"
+}
+
 # from_mirror REPO : the bare git directory of REPO under $mirror.
 from_mirror() {
   local name=${1//\//+}
@@ -65,14 +82,16 @@ if [[ -n "$mirror" ]]; then
   shear=$(from_mirror $SHEAR) || exit 1
   tip=$(from_mirror $TIP) || exit 1
   gelslim=$(from_mirror $GELSLIM) || exit 1
+  gsrobotics=$(from_mirror $GSROBOTICS) || exit 1
 else
   shear=$(clone $SHEAR data/cr_tactip/surface_3d/val_data data/franka_tactip_1/surface_3d/test) || exit 1
   tip=$(clone $TIP readme_images) || exit 1
   gelslim=$(clone $GELSLIM "matlab_version/calibration functions/illumination_calib/Dots1") || exit 1
+  gsrobotics=$(clone_at $GSROBOTICS $GS_MINI_COMMIT demos/marker_tracking/data/mini_example.avi) || exit 1
 fi
 
 "$python" eval/layout.py --shear "$shear" --tip "$tip" --gelslim "$gelslim" \
-  --out data/real --frames "$frames" --seed "$seed"
+  --gsrobotics "$gsrobotics" --out data/real --frames "$frames" --seed "$seed"
 # Raw-looking taps (tactip_raw's pins placed as the cr taps put theirs),
 # with the raw frame's light and with a light of their own per frame.
 "$python" eval/raw_taps.py --data data/real

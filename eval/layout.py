@@ -15,13 +15,16 @@ snapshot; files are read with `git show`). Nothing here is committed: the data
 sets carry no licence, data/ is git-ignored.
 
 Usage:
-    python eval/layout.py --shear PATH --tip PATH --gelslim PATH [--out data/real]
-        [--frames 200] [--seed 0]
+    python eval/layout.py --shear PATH --tip PATH --gelslim PATH [--gsrobotics PATH]
+        [--out data/real] [--frames 200] [--seed 0]
 
 PATH is a work tree or a bare git directory of
     dexterousrobot/tactile_data_shear            (--shear)
     dexterousrobot/tactile_image_processing      (--tip)
     siyuandong16/gelsight_heightmap_reconstruction (--gelslim)
+    gelsightinc/gsrobotics                       (--gsrobotics; GPL-3.0. The
+        video is read at commit GS_MINI_COMMIT, which added it: later commits
+        removed it, so a work tree must have that commit checked out)
 """
 
 from __future__ import annotations
@@ -40,22 +43,32 @@ from pathlib import Path
 SHEAR_URL = "https://github.com/dexterousrobot/tactile_data_shear"
 TIP_URL = "https://github.com/dexterousrobot/tactile_image_processing"
 GELSLIM_URL = "https://github.com/siyuandong16/gelsight_heightmap_reconstruction"
+GSROBOTICS_URL = "https://github.com/gelsightinc/gsrobotics"
 
 CR_DIR = "data/cr_tactip/surface_3d/val_data"
 FRANKA_DIR = "data/franka_tactip_1/surface_3d/test"
 RAW_FRAME = "readme_images/raw_tactile_image.png"
 DOTS_DIR = "matlab_version/calibration functions/illumination_calib/Dots1"
+GS_MINI_VIDEO = "demos/marker_tracking/data/mini_example.avi"
+GS_MINI_COMMIT = "3d1bed69c56d2970d5901a845fdcb3c8da7e9415"
 
 # Pin counts and how they were obtained (see eval/README.md).
 TACTIP_PINS = 331
 GELSLIM_REF_DOTS = 261
+# GelSight's own setting for the GS Mini at 320x240 (N_ = 8 rows, M_ = 10
+# columns: demos/mini_tracking_windows_V0/setting.py of gsrobotics).
+GS_MINI_DOTS = 80
+# A GS Mini frame whose shading differs from the rest over at least this many
+# pixels is a contact (the frames after a release keep 0-124).
+GS_MINI_CONTACT_AREA_PX = 500
 
 
 class Source:
     """A git repository read from a work tree or a bare git directory."""
 
-    def __init__(self, path: str):
+    def __init__(self, path: str, rev: str = "HEAD"):
         self.path = Path(path)
+        self.rev = rev
         self.bare = not (self.path / ".git").exists() and (self.path / "HEAD").is_file()
         if not self.bare and not self.path.is_dir():
             sys.exit(f"layout.py: {path}: not a directory")
@@ -67,7 +80,7 @@ class Source:
 
     def commit(self) -> str:
         if self.bare:
-            return self._git("rev-parse", "HEAD").decode().strip()
+            return self._git("rev-parse", self.rev).decode().strip()
         return subprocess.run(
             ["git", "-C", str(self.path), "rev-parse", "HEAD"],
             check=True, capture_output=True, text=True,
@@ -75,13 +88,13 @@ class Source:
 
     def read(self, rel: str) -> bytes:
         if self.bare:
-            return self._git("show", f"HEAD:{rel}")
+            return self._git("show", f"{self.rev}:{rel}")
         return (self.path / rel).read_bytes()
 
     def list(self, rel_dir: str) -> list[str]:
         """File names (not paths) directly inside rel_dir."""
         if self.bare:
-            out = self._git("ls-tree", "--name-only", "HEAD", rel_dir.rstrip("/") + "/")
+            out = self._git("ls-tree", "--name-only", self.rev, rel_dir.rstrip("/") + "/")
             return sorted(Path(p).name for p in out.decode().splitlines())
         return sorted(p.name for p in (self.path / rel_dir).iterdir() if p.is_file())
 
@@ -195,11 +208,90 @@ def ball_centre(img, ref) -> tuple[float, float, int]:
     return float(cen[k][0]), float(cen[k][1]), int(st[k, cv2.CC_STAT_AREA])
 
 
+def mini_dots(bgr):
+    """The dots of the GelSight Mini rest frame, by a manual-parameter detector
+    checked by eye on an overlay: brightest channel minus its Gaussian blur
+    (sigma 8 px) darker than 12 levels, 3x3 closing, regions of at least 20 px
+    (a speck of 10 px on the gel is left out). Finds the 8 x 10 lattice: 7
+    full rows (100-125 px a dot) and the top row, which the frame's edge cuts
+    through the dots' centres (33-61 px)."""
+    import cv2
+    import numpy as np
+
+    g = bgr.max(axis=2).astype(np.float32)
+    d = cv2.GaussianBlur(g, (0, 0), 8) - g
+    m = cv2.morphologyEx((d > 12).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    _, _, st, cen = cv2.connectedComponentsWithStats(m)
+    return cen[1:][st[1:, cv2.CC_STAT_AREA] >= 20]
+
+
+def gs_mini(src: Source, out: Path) -> None:
+    """GelSight Mini marker video (gsrobotics): every frame, frame 0 as rest,
+    the contact and its centre from the shading (as for gelslim_dots)."""
+    import cv2
+    import tempfile
+
+    d = fresh_dir(out / "gelsight_mini")
+    with tempfile.NamedTemporaryFile(suffix=".avi") as tmp:
+        tmp.write(src.read(GS_MINI_VIDEO))
+        tmp.flush()
+        cap = cv2.VideoCapture(tmp.name)
+        frames = []
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                break
+            frames.append(img)
+    if not frames:
+        sys.exit(f"layout.py: cannot decode {GS_MINI_VIDEO}")
+    ref = frames[0]
+    cv2.imwrite(str(d / "rest.png"), ref)
+    rows = []
+    for k, img in enumerate(frames):
+        name = f"{k:04d}"
+        cv2.imwrite(str(d / "frames" / f"{name}.png"), img)
+        sx, sy, area = ball_centre(img, ref)
+        contact = int(area >= GS_MINI_CONTACT_AREA_PX)
+        if not contact:
+            sx = sy = float("nan")
+        rows.append([name, contact, f"{sx:.2f}", f"{sy:.2f}", area])
+    write_labels(d / "labels.csv", ["frame", "contact", "shade_x_px", "shade_y_px", "shade_area_px"], rows)
+    dots = mini_dots(ref)
+    write_pins(d / "pins_ref.csv", dots)
+    write_set(d, {
+        "name": "gelsight_mini",
+        "source": f"{GSROBOTICS_URL} {GS_MINI_VIDEO} (GPL-3.0)",
+        "source_commit": src.commit(),
+        "size": "320x240 RGB (XVID video, each frame written as PNG)",
+        "frames": len(rows),
+        "pin_count": GS_MINI_DOTS,
+        "pin_count_how": "GelSight's own grid for the GS Mini at 320x240 (8 rows x 10 columns, "
+        "gsrobotics demos/mini_tracking_windows_V0/setting.py); layout.py mini_dots finds the "
+        "80 on rest.png (pins_ref.csv). The frame's top edge cuts the top row through the "
+        "dots' centres (29-53 % of a dot visible): a tool that drops half dots counts 70",
+        "pins_ref": "pins_ref.csv: the 80 dot centres of rest.png (layout.py mini_dots)",
+        "rest": "rest.png = frame 0000 (no contact; frames 0000-0057 are before the first press)",
+        "regress_on": ["shade_x_px", "shade_y_px"],
+        "centre_label": ["shade_x_px", "shade_y_px"],
+        "labels": "shade_x_px, shade_y_px, shade_area_px: the largest connected region where "
+        "the summed |RGB| difference of the frame and rest, both Gaussian-blurred (sigma 3 px), "
+        f"exceeds 25, and its centroid; contact = that region has at least "
+        f"{GS_MINI_CONTACT_AREA_PX} px (the centre is NaN otherwise). Three finger presses "
+        "that slide over the gel (about frames 58-86, 89-153, 160-207); the region is cut by "
+        "the frame's edge in the second and third.",
+        "notes": "GelSight Mini: dark dots on a colour-lit gel seen flat-on, a square lattice "
+        "of about 32 px pitch. No pose label: the shading gives where the finger is.",
+    })
+    print(f"gelsight_mini: {len(rows)} frames ({sum(r[1] for r in rows)} contacts), "
+          f"{len(dots)} reference dots on rest")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--shear", required=True, help="tactile_data_shear work tree or bare git dir")
     ap.add_argument("--tip", required=True, help="tactile_image_processing work tree or bare git dir")
     ap.add_argument("--gelslim", required=True, help="gelsight_heightmap_reconstruction work tree or bare git dir")
+    ap.add_argument("--gsrobotics", help="gsrobotics work tree (at GS_MINI_COMMIT) or bare git dir")
     ap.add_argument("--out", default="data/real")
     ap.add_argument("--frames", type=int, default=200, help="frames per TacTip shear set")
     ap.add_argument("--seed", type=int, default=0)
@@ -310,6 +402,10 @@ def main() -> None:
         "position label: the ball centre above is derived from the image shading.",
     })
     print(f"gelslim_dots: {len(rows)} frames, {len(dots)} reference dots on ref")
+
+    if args.gsrobotics:
+        src = Source(args.gsrobotics, GS_MINI_COMMIT)
+        gs_mini(src, out)
 
 
 if __name__ == "__main__":

@@ -69,6 +69,9 @@ cv2.setNumThreads(1)
 ALL_SETS = ["tactip_shear_cr", "tactip_shear_franka", "tactip_raw", "gelslim_dots"]
 # Made by eval/raw_taps.py from the sets above; run when present.
 DERIVED_SETS = ["tactip_raw_taps", "tactip_raw_taps_light"]
+# Laid out by get-data.sh since 2026-11-27 (gsrobotics); run when present, as
+# a data folder laid out before has no such set.
+OPTIONAL_SETS = ["gelsight_mini"]
 TOOLS = ["dexitac default", "dexitac tuned", "opencv", "doh"]
 
 
@@ -337,7 +340,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", default="target/release/dexitac")
     ap.add_argument("--sets", nargs="+", default=None,
-                    help=f"default: {' '.join(ALL_SETS)}, and {' '.join(DERIVED_SETS)} when laid out")
+                    help=f"default: {' '.join(ALL_SETS)}, and {' '.join(DERIVED_SETS + OPTIONAL_SETS)} "
+                    "when laid out")
     ap.add_argument("--data", type=Path, default=Path("data/real"))
     ap.add_argument("--out", type=Path, default=Path("eval/results"))
     ap.add_argument("--rest-modes", nargs="+", default=["level", "median"], choices=["level", "median"],
@@ -347,7 +351,8 @@ def main() -> None:
                     help="run only these tools (e.g. dexitac after a change, the baselines unchanged)")
     a = ap.parse_args()
     if a.sets is None:
-        a.sets = ALL_SETS + [s for s in DERIVED_SETS if (a.data / s / "set.json").exists()]
+        a.sets = ALL_SETS + [s for s in DERIVED_SETS + OPTIONAL_SETS
+                             if (a.data / s / "set.json").exists()]
     exe = str(Path(a.dexitac).resolve())
     if not Path(exe).is_file():
         sys.exit(f"run.py: no dexitac binary at {a.dexitac}: build it with "
@@ -422,7 +427,8 @@ def main() -> None:
           "fraction of frames with a contact centre; R² = leave-one-out R² of a linear "
           "regression of the centre x (y) on the set's labels (regress_on in set.json), "
           "contact frames only; centre err = median distance from the centre to the labelled "
-          "contact centre (gelslim: the ball imprint found from the shading); ms/frame = "
+          "contact centre (gelslim: the ball imprint, gelsight_mini: the finger, both found "
+          "from the shading); ms/frame = "
           "the tool's own per-frame time (dexitac: its t_total_ms column, preparation + "
           "pipeline; baselines: perf_counter around detection + density + centre); wall "
           "= process (dexitac) or loop (baselines, with decoding) time / frames, including the "

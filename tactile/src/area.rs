@@ -355,13 +355,14 @@ fn in_polygon(poly: &[PointPx], p: PointPx) -> bool {
     inside
 }
 
-/// Markers that sit in a regular lattice: a marker is kept when at least
-/// [`LATTICE_MIN_NEIGHBOURS`] others lie within [`LATTICE_REACH`] times its
-/// own nearest-neighbour distance, and that distance is at most
-/// [`LATTICE_MAX_GAP`] times the median one. A skin's markers (the rim's
-/// included: two along the rim and two inwards) pass; LEDs, dust and
-/// reflections on the housing are isolated or irregular and fail. Returns
-/// the indices kept. O(n^2): calibration runs once.
+/// Markers that sit in a regular lattice: a marker is kept when its
+/// nearest-neighbour distance is at most [`LATTICE_MAX_GAP`] times the
+/// median one and at least [`LATTICE_MIN_NEIGHBOURS`] others lie within
+/// [`LATTICE_REACH`] times that distance, or it completes a cell of kept
+/// markers (a square lattice's corner, `completes_a_cell`). A skin's
+/// markers (the rim's included: two along the rim and two inwards) pass;
+/// LEDs, dust and reflections on the housing are isolated or irregular and
+/// fail. Returns the indices kept. O(n^2): calibration runs once.
 pub fn lattice_members(points: &[PointPx]) -> Vec<usize> {
     let n = points.len();
     if n < LATTICE_MIN_NEIGHBOURS + 1 {
@@ -386,16 +387,56 @@ pub fn lattice_members(points: &[PointPx]) -> Vec<usize> {
     }
     let k = nn.len() / 2;
     let median = *nn.select_nth_unstable_by(k, f64::total_cmp).1;
-    dists
+    let gap_ok = |d: &[f64]| d.first().is_some_and(|&d1| d1 <= LATTICE_MAX_GAP * median);
+    let member: Vec<bool> = dists
         .iter()
-        .enumerate()
-        .filter(|(_, d)| {
-            let Some(&d1) = d.first() else { return false };
-            d1 <= LATTICE_MAX_GAP * median
-                && d.iter().filter(|&&x| x <= LATTICE_REACH * d1).count() >= LATTICE_MIN_NEIGHBOURS
+        .map(|d| {
+            gap_ok(d)
+                && d.iter().filter(|&&x| x <= LATTICE_REACH * d[0]).count()
+                    >= LATTICE_MIN_NEIGHBOURS
         })
-        .map(|(i, _)| i)
+        .collect();
+    (0..n)
+        .filter(|&i| {
+            member[i] || (gap_ok(&dists[i]) && completes_a_cell(points, &member, i, median))
+        })
         .collect()
+}
+
+/// Whether `points[i]` is the fourth corner of a square lattice cell whose
+/// other three corners are members: two members `a`, `b` within
+/// [`LATTICE_REACH`] median spacings of it, at right angles seen from it
+/// ([`CELL_CORNER_SKEW_DEG`]), and a member within
+/// [`CELL_CORNER_TOLERANCE`] median spacings of `a + b - p`.
+/// A square lattice's corner marker has only its two side neighbours
+/// within the reach (the diagonal one lies 1.41 spacings away, and 1.5-1.6
+/// times its own nearest distance where the frame's edge cuts it or the lens
+/// distorts the corner), and so fails the neighbour count; a speck on the
+/// housing lies on no such cell.
+fn completes_a_cell(points: &[PointPx], member: &[bool], i: usize, median: f64) -> bool {
+    let p = points[i];
+    let reach = LATTICE_REACH * median;
+    let near: Vec<PointPx> = points
+        .iter()
+        .zip(member)
+        .filter(|&(q, &m)| m && (q.x - p.x).hypot(q.y - p.y) <= reach)
+        .map(|(q, _)| *q)
+        .collect();
+    let tolerance = CELL_CORNER_TOLERANCE * median;
+    near.iter().enumerate().any(|(k, a)| {
+        near[k + 1..].iter().any(|b| {
+            let (ax, ay, bx, by) = (a.x - p.x, a.y - p.y, b.x - p.x, b.y - p.y);
+            // Sides at right angles, within CELL_CORNER_SKEW_DEG.
+            let cos = (ax * bx + ay * by) / (ax.hypot(ay) * bx.hypot(by));
+            let apart = cos.abs() <= CELL_CORNER_SKEW_DEG.to_radians().sin();
+            let c = PointPx::new(a.x + bx, a.y + by);
+            apart
+                && points
+                    .iter()
+                    .zip(member)
+                    .any(|(q, &m)| m && (q.x - c.x).hypot(q.y - c.y) <= tolerance)
+        })
+    })
 }
 
 /// Neighbours a lattice marker needs within [`LATTICE_REACH`] x its
@@ -409,6 +450,14 @@ pub const LATTICE_REACH: f64 = 1.5;
 /// disc sit about 1.95 median spacings from the outer ring; a dome's
 /// central markers (the widest spaced) are within about 1.3.
 pub const LATTICE_MAX_GAP: f64 = 1.5;
+/// How far from the fourth corner of a cell a member may lie for a marker
+/// to complete it ([`lattice_members`]), in median spacings.
+pub const CELL_CORNER_TOLERANCE: f64 = 0.25;
+/// A completed cell's sides meet at right angles within this many degrees:
+/// a square lattice's cell (the lens and a cut edge skew it by a few
+/// degrees), not a hex lattice's rhombus (60 and 120 degrees), which an LED
+/// right outside the outer ring would complete.
+pub const CELL_CORNER_SKEW_DEG: f64 = 20.0;
 /// The automatic area is the lattice's convex hull grown by this many
 /// pitches (the outer markers' own extent plus a margin for their motion).
 pub const HULL_GROWTH_PITCH: f64 = 0.6;

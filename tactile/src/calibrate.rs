@@ -336,7 +336,7 @@ fn stable_markers(rest: &[GreyFrame], detector: &Detector) -> Vec<PointPx> {
     };
     let (w, h) = (first.width(), first.height());
     let mut sums: Vec<(PointPx, usize)> = markers::detect(first, detector)
-        .typical_positions()
+        .typical_positions(w, h)
         .into_iter()
         .map(|p| (p, 1))
         .collect();
@@ -409,9 +409,9 @@ pub fn calibrate_from_frames(
     // lightest tap shows nearly all of them.
     let detections: Vec<Vec<PointPx>> = picked
         .iter()
-        .map(|f| markers::detect(f, &detector).typical_positions())
+        .map(|f| markers::detect(f, &detector).typical_positions(w, h))
         .collect();
-    let from_median = markers::detect(&median, &detector).typical_positions();
+    let from_median = markers::detect(&median, &detector).typical_positions(w, h);
     let anchors = if from_median.len() >= MIN_REST_MARKERS {
         // The frame that agrees best with the median image: the most of its
         // markers within a fifth of a pitch of a median-image marker (the
@@ -529,7 +529,23 @@ fn finish(
         });
     }
     let pitch_px = median_spacing(&rest_markers);
-    let surface = params.surface.resolve(&rest_markers, map);
+    // The frame's edge cuts the markers beyond it, and their centroids move
+    // inwards by up to a radius: spacings that shrink towards the frame's
+    // edge, as a dome's do towards its rim. Only the uncut ones tell the
+    // skin's shape (a flat GelSight Mini was taken for a dome with its rim
+    // at 62 degrees).
+    let reach_px = detector.radius_px + 2.0;
+    let uncut: Vec<PointPx> = rest_markers
+        .iter()
+        .copied()
+        .filter(|p| {
+            p.x >= reach_px
+                && p.y >= reach_px
+                && p.x <= w as f64 - 1.0 - reach_px
+                && p.y <= h as f64 - 1.0 - reach_px
+        })
+        .collect();
+    let surface = params.surface.resolve(&uncut, map);
     detector.surface = surface;
     detector.cell_px = ((pitch_px / detector.bin as f64).round() as usize).max(4);
     detector.window_px = Some(search_window(&rest_markers, &detector, pitch_px, w, h));
@@ -1116,5 +1132,63 @@ mod tests {
             calibrate(&[a], &params),
             Err(CalibrationError::Markers(_))
         ));
+    }
+
+    /// A GelSight-like skin seen flat-on, `w x h`: dark dots of radius 6 px
+    /// on a bright gel, a lattice of `pitch_px` (x, y) from `(x0, y0)`, their
+    /// edges blurred as by a lens (a logistic step of scale 0.9 px, about a
+    /// Gaussian PSF of 1.5 px). Returns the frame and the dots that show:
+    /// those whose centre lies at most a pixel beyond the frame's edge.
+    fn square_dots(
+        (w, h): (usize, usize),
+        (x0, y0): (f64, f64),
+        pitch_px: (f64, f64),
+    ) -> (GreyFrame, Vec<PointPx>) {
+        let radius_px = 6.0;
+        let centres: Vec<PointPx> = (0..)
+            .map(|j| y0 + j as f64 * pitch_px.1)
+            .take_while(|&y| y < h as f64)
+            .flat_map(|y| {
+                (0..)
+                    .map(move |i| PointPx::new(x0 + i as f64 * pitch_px.0, y))
+                    .take_while(|p| p.x < w as f64)
+            })
+            .collect();
+        let mut data = vec![200u8; w * h];
+        for (k, v) in data.iter_mut().enumerate() {
+            let (x, y) = ((k % w) as f64, (k / w) as f64);
+            let d = centres
+                .iter()
+                .map(|c| (c.x - x).hypot(c.y - y))
+                .fold(f64::INFINITY, f64::min);
+            let cover = 1.0 / (1.0 + ((d - radius_px) / 0.9).exp());
+            *v = (200.0 - 140.0 * cover).round() as u8;
+        }
+        (GreyFrame::new(w, h, data).unwrap(), centres)
+    }
+
+    #[test]
+    fn a_square_lattice_cut_by_the_frame_keeps_its_edge_and_corner_dots() {
+        // As the GelSight Mini frames of eval/ show their skin: the top row
+        // and the left column centred a pixel beyond the frame's edge (a
+        // third of each dot in view), the top-left dot a tenth, on a square
+        // lattice and on one a little wider than high (as the Mini's lens
+        // makes it near the frame's corners). Each cut dot is a marker; the
+        // corner ones were dropped as too small and as off the lattice, and
+        // the cut dots' centroids, moved inwards, made the flat skin a dome.
+        for pitch_px in [(32.0, 32.0), (34.0, 30.0)] {
+            let (rest, dots) = square_dots((320, 240), (-1.0, -1.0), pitch_px);
+            let cal = calibrate(&[rest], &Params::default()).unwrap();
+            assert_eq!(cal.rest_markers.len(), dots.len(), "{pitch_px:?}");
+            for d in &dots {
+                assert!(
+                    cal.rest_markers
+                        .iter()
+                        .any(|p| (p.x - d.x).abs() < 4.0 && (p.y - d.y).abs() < 4.0),
+                    "{pitch_px:?}: dot {d:?}"
+                );
+            }
+            assert_eq!(cal.surface, Surface::Flat, "{pitch_px:?}");
+        }
     }
 }

@@ -128,16 +128,47 @@ impl Markers {
 
     /// Positions of the markers of typical size: effective area within
     /// [`SIZE_RANGE`] times the median (drops LEDs, reflections and specks
-    /// from a rest frame).
-    pub fn typical_positions(&self) -> Vec<PointPx> {
+    /// from a rest frame). A marker the edge of the `width x height` frame
+    /// cuts shows only part of its blob: for one cut by one edge, with at
+    /// least [`CUT_MIN_STRENGTH`] of the median strength, the lower bound is
+    /// halved, by two (a corner) quartered (the corner dots of the square
+    /// lattices of a GelSight Mini and a GelSlim, cut to a fifth of a dot,
+    /// were dropped; BENCHMARKS.md, session 20).
+    pub fn typical_positions(&self, width: usize, height: usize) -> Vec<PointPx> {
         let median = percentile(self.list.iter().map(|m| m.area_px).collect(), 0.5);
+        let strong =
+            CUT_MIN_STRENGTH * percentile(self.list.iter().map(|m| m.strength).collect(), 0.5);
         self.list
             .iter()
-            .filter(|m| m.area_px >= SIZE_RANGE.0 * median && m.area_px <= SIZE_RANGE.1 * median)
+            .filter(|m| {
+                // Cut: nearer the frame's edge (half a pixel beyond the
+                // outer pixel centres) than its own blob's radius, as a blob
+                // the edge does not cut cannot be (a speck by the edge of a
+                // binarised TacTip disc is not), and strong.
+                let reach_px = (m.area_px as f64 / std::f64::consts::PI).sqrt() + 0.5;
+                let cut =
+                    |v: f64, size: usize| v + 0.5 < reach_px || size as f64 - 0.5 - v < reach_px;
+                let edges = if m.strength >= strong {
+                    u8::from(cut(m.pos.x, width)) + u8::from(cut(m.pos.y, height))
+                } else {
+                    0
+                };
+                let visible = 0.5f32.powi(edges.into());
+                m.area_px >= SIZE_RANGE.0 * visible * median && m.area_px <= SIZE_RANGE.1 * median
+            })
             .map(|m| m.pos)
             .collect()
     }
 }
+
+/// A marker the frame's edge cuts keeps its darkness, and the mirrored
+/// detection image shows its part twice: its blob strength stays near a
+/// whole one's (0.7-0.8 of the median on the GelSight Mini and GelSlim rest
+/// frames). A sliver of a dot beyond the edge is weak (0.17-0.21 on the
+/// GelSlim rest), and is followed in one frame and lost in the next.
+/// [`Markers::typical_positions`] eases its size bound only for cut markers
+/// at least this strong, over the median strength.
+pub const CUT_MIN_STRENGTH: f32 = 0.5;
 
 /// A configured detector (from [`auto_detector`] or built by hand).
 ///
@@ -2249,7 +2280,10 @@ pub fn auto_detector(rest: &GreyFrame, params: &MarkerParams) -> Result<Detector
             let dark = detector_for(rest, params, true);
             let lattice = |d: &Result<Detector, MarkerError>| {
                 d.as_ref().map_or(0, |d| {
-                    crate::area::lattice_members(&detect(rest, d).typical_positions()).len()
+                    crate::area::lattice_members(
+                        &detect(rest, d).typical_positions(rest.width(), rest.height()),
+                    )
+                    .len()
                 })
             };
             // Bright wins ties: a TacTip's dark gaps between pins are no
