@@ -700,4 +700,46 @@ mod tests {
         ));
         assert!(!SensingArea::whole(4, 4).contains(PointPx::new(f64::NAN, 1.0)));
     }
+
+    proptest::proptest! {
+        /// Every marker of a rectangular lattice, turned any way, is a
+        /// lattice member, its four corners included (up to an aspect of
+        /// 1.118 the plain neighbour count passes them; beyond, only a
+        /// completed cell does). A point by the straight edge of a hex
+        /// lattice, where its next row would be, has two members 60 degrees
+        /// apart: it completes no cell and stays out.
+        #[test]
+        fn rectangular_lattices_keep_their_corners_and_hex_edges_keep_out(
+            pitch in 8.0f64..40.0,
+            aspect in 1.0f64..1.3,
+            angle in 0.0f64..std::f64::consts::PI,
+            (cols, rows) in (3usize..9, 3usize..9),
+        ) {
+            let (c, s) = (angle.cos(), angle.sin());
+            let at = |i: f64, j: f64| {
+                let (x, y) = (i * pitch * aspect, j * pitch);
+                PointPx::new(400.0 + c * x - s * y, 400.0 + s * x + c * y)
+            };
+            let lattice: Vec<PointPx> = (0..rows)
+                .flat_map(|j| (0..cols).map(move |i| (i, j)))
+                .map(|(i, j)| at(i as f64, j as f64))
+                .collect();
+            proptest::prop_assert_eq!(lattice_members(&lattice).len(), lattice.len());
+
+            let side = (12.0 * pitch) as usize;
+            let mut skin = crate::test_fixtures::hex_points(side, side, pitch);
+            // A site of the row above the top row, half a pitch along from
+            // a top-row marker: its two members lie 60 degrees apart.
+            let top = skin[skin.len().min(7) / 2];
+            let beyond = PointPx::new(top.x + 0.5 * pitch, top.y - 0.866 * pitch);
+            let neighbours = skin
+                .iter()
+                .filter(|p| (p.x - beyond.x).hypot(p.y - beyond.y) <= 1.5 * pitch)
+                .count();
+            proptest::prop_assert_eq!(neighbours, 2);
+            skin.push(beyond);
+            let kept = lattice_members(&skin);
+            proptest::prop_assert!(!kept.contains(&(skin.len() - 1)), "{:?} kept", beyond);
+        }
+    }
 }
