@@ -131,9 +131,9 @@ impl Markers {
     /// from a rest frame). A marker the edge of the `width x height` frame
     /// cuts shows only part of its blob: for one cut by one edge, with at
     /// least [`CUT_MIN_STRENGTH`] of the median strength, the lower bound is
-    /// halved, by two (a corner) quartered (the corner dots of the square
-    /// lattices of a GelSight Mini and a GelSlim, cut to a fifth of a dot,
-    /// were dropped; BENCHMARKS.md, session 20).
+    /// halved, by two (a corner) quartered (the GelSight Mini's top corner
+    /// dots, cut to a fifth of a dot, were dropped as specks, and so was a
+    /// GelSlim's bottom-edge dot; BENCHMARKS.md, session 20).
     pub fn typical_positions(&self, width: usize, height: usize) -> Vec<PointPx> {
         let median = percentile(self.list.iter().map(|m| m.area_px).collect(), 0.5);
         let strong =
