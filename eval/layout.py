@@ -33,7 +33,6 @@ import argparse
 import csv
 import io
 import json
-import os
 import random
 import shutil
 import subprocess
@@ -181,14 +180,23 @@ def gelslim_dots(bgr):
     right-hand neighbours), i.e. the 14 x 19 lattice less the 5 top-right dots
     whose centres lie just outside the frame."""
     import cv2
+
+    c = dark_dots(cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY), level=8, min_area_px=6)
+    return c[c[:, 1] >= 2.0]
+
+
+def dark_dots(grey, level: float, min_area_px: int):
+    """Centroids of the dark dots of a grey image: the regions at least
+    `min_area_px` large where it lies more than `level` grey levels below its
+    Gaussian blur (sigma 8 px), after a 3x3 closing."""
+    import cv2
     import numpy as np
 
-    g = cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY).astype(np.float32)
+    g = grey.astype(np.float32)
     d = cv2.GaussianBlur(g, (0, 0), 8) - g
-    m = cv2.morphologyEx((d > 8).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    m = cv2.morphologyEx((d > level).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
     _, _, st, cen = cv2.connectedComponentsWithStats(m)
-    a, c = st[1:, cv2.CC_STAT_AREA], cen[1:]
-    return c[(a >= 6) & (c[:, 1] >= 2.0)]
+    return cen[1:][st[1:, cv2.CC_STAT_AREA] >= min_area_px]
 
 
 def ball_centre(img, ref) -> tuple[float, float, int]:
@@ -215,14 +223,7 @@ def mini_dots(bgr):
     (a speck of 10 px on the gel is left out). Finds the 8 x 10 lattice: 7
     full rows (100-125 px a dot) and the top row, which the frame's edge cuts
     through the dots' centres (33-61 px)."""
-    import cv2
-    import numpy as np
-
-    g = bgr.max(axis=2).astype(np.float32)
-    d = cv2.GaussianBlur(g, (0, 0), 8) - g
-    m = cv2.morphologyEx((d > 12).astype(np.uint8), cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
-    _, _, st, cen = cv2.connectedComponentsWithStats(m)
-    return cen[1:][st[1:, cv2.CC_STAT_AREA] >= 20]
+    return dark_dots(bgr.max(axis=2), level=12, min_area_px=20)
 
 
 def gs_mini(src: Source, out: Path) -> None:
