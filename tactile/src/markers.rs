@@ -317,16 +317,25 @@ fn detect_in(
     detect_split_in(frame, det, window, typical_range, None, &mut Vec::new())
 }
 
-/// [`detect_in`], and with `pin_area_px` (a pin's effective area in this
-/// frame) a candidate whose blob holds two or three touching pins
-/// ([`split_chain`]) gives those, in `chains`, instead of one marker between
-/// them or none.
+/// What [`detect_split_in`] needs to split blobs of several pins: the
+/// frame's typical pin effective area and the lattice's pitch.
+#[derive(Debug, Clone, Copy)]
+struct PinScale {
+    area_px: f32,
+    pitch_px: f64,
+}
+
+/// [`detect_in`], and with `pins` (a pin's effective area in this frame,
+/// the lattice pitch) a candidate whose blob holds two or three touching
+/// pins ([`split_chain`]), or two that a blur ran into one blob
+/// ([`split_blurred_pair`]), gives those, in `chains`, instead of one
+/// marker between them or none.
 fn detect_split_in(
     frame: &GreyFrame,
     det: &Detector,
     window: [usize; 4],
     typical_range: Option<f32>,
-    pin_area_px: Option<f32>,
+    pins: Option<PinScale>,
     chains: &mut Vec<Vec<Marker>>,
 ) -> Vec<Marker> {
     let (fw, fh) = (frame.width(), frame.height());
@@ -401,13 +410,24 @@ fn detect_split_in(
         // marker) or one blob between two (a marker on neither). The
         // candidate's centroid, when measured here, is used again below.
         let mut first_centroid = None;
-        if let Some(pin_area_px) = pin_area_px.filter(|_| det.may_hold(guess)) {
+        if let Some(PinScale {
+            area_px: pin_area_px,
+            pitch_px,
+        }) = pins.filter(|_| det.may_hold(guess))
+        {
             let blob = refine(frame, guess, det.radius_px, det.min_contrast);
             first_centroid = Some((guess, blob));
             let half_maximum = (lo + 0.5 * range).clamp(1.0, 255.0) as u8;
             if let Some(pins) = blob
                 .filter(|b| b.2 >= CHAIN_MIN_WINDOW_AREA * pin_area_px)
-                .and_then(|b| split_chain(frame, b.0, half_maximum, pin_area_px))
+                .and_then(|b| {
+                    split_chain(frame, b.0, half_maximum, pin_area_px).or_else(|| {
+                        let (near, far) = BLURRED_PAIR_PITCHES;
+                        let range_px = (near * pitch_px, far * pitch_px);
+                        split_blurred_pair(frame, b.0, lo, half_maximum, pin_area_px, range_px)
+                            .map(Vec::from)
+                    })
+                })
             {
                 let pin = |pos: PointPx| Marker {
                     pos,
@@ -1286,7 +1306,10 @@ fn search_around(
             det,
             b,
             Some(typical_range),
-            Some(pin_area_px),
+            Some(PinScale {
+                area_px: pin_area_px,
+                pitch_px,
+            }),
             &mut chains,
         );
         for m in found {
@@ -1799,35 +1822,16 @@ fn split_chain(
         return None;
     }
     let diameter_px = 2.0 * (pin_area_px as f64 / std::f64::consts::PI).sqrt();
-    let reach = (2.0 * diameter_px) as usize + 2;
-    if !chord_says_chain(frame, (sx, sy), level, diameter_px, reach) {
+    if !chord_says_chain(
+        frame,
+        (sx, sy),
+        level,
+        diameter_px,
+        chain_reach_px(pin_area_px),
+    ) {
         return None;
     }
-    let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
-    let (x1, y1) = ((sx + reach).min(w - 1), (sy + reach).min(h - 1));
-    let span = x1 - x0 + 1;
-    // A blob larger than three pins' effective area (a flat top's pixel
-    // count; a blurred pin covers about twice its effective area above
-    // half maximum, so three blurred pins in a row are left alone) is no
-    // chain, and is not filled further.
-    let max_count = (CHAIN_AREA[1].1 * pin_area_px) as usize;
-    let mut blob = vec![(sx, sy)];
-    let mut seen = vec![false; span * (y1 - y0 + 1)];
-    seen[(sy - y0) * span + sx - x0] = true;
-    let mut next = 0;
-    while let Some(&(x, y)) = blob.get(next) {
-        next += 1;
-        if x == x0 || y == y0 || x == x1 || y == y1 || blob.len() > max_count {
-            return None;
-        }
-        for (nx, ny) in [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)] {
-            let k = (ny - y0) * span + nx - x0;
-            if !seen[k] && data[ny * w + nx] >= level {
-                seen[k] = true;
-                blob.push((nx, ny));
-            }
-        }
-    }
+    let blob = fill_blob(frame, (sx, sy), level, pin_area_px)?;
     let count = blob.len() as f64;
     let top = blob
         .iter()
@@ -1898,6 +1902,320 @@ fn split_chain(
     )
 }
 
+/// The pixels at or above `level` 4-connected to `(sx, sy)`, within two pin
+/// diameters of it (`pin_area_px`: a pin's effective area); `None` when
+/// they reach that far, or cover more than three pins' effective area (a
+/// flat top's pixel count; a blurred pin covers about twice its effective
+/// area above half maximum, so three blurred pins in a row are left
+/// alone), where the fill stops.
+fn fill_blob(
+    frame: &GreyFrame,
+    (sx, sy): (usize, usize),
+    level: u8,
+    pin_area_px: f32,
+) -> Option<Vec<(usize, usize)>> {
+    let (w, h) = (frame.width(), frame.height());
+    let data = frame.data();
+    if sx >= w || sy >= h || data[sy * w + sx] < level {
+        return None;
+    }
+    let reach = chain_reach_px(pin_area_px);
+    let (x0, y0) = (sx.saturating_sub(reach), sy.saturating_sub(reach));
+    let (x1, y1) = ((sx + reach).min(w - 1), (sy + reach).min(h - 1));
+    let max_count = (CHAIN_AREA[1].1 * pin_area_px) as usize;
+    let mut blob = Vec::with_capacity(max_count + 4);
+    blob.push((sx, sy));
+    // One bit per pixel of the window: rows of up to 64 px on the stack
+    // (the window is two pin diameters either way), a vector beyond.
+    let rows = y1 - y0 + 1;
+    let mut small = [0u64; 64];
+    let mut large = Vec::new();
+    let seen: &mut [u64] = if x1 - x0 < 64 && rows <= 64 {
+        &mut small[..rows]
+    } else {
+        large.resize(rows * (x1 - x0 + 1).div_ceil(64), 0u64);
+        &mut large
+    };
+    let words = (x1 - x0 + 1).div_ceil(64);
+    let mut mark = |x: usize, y: usize| {
+        let (k, bit) = ((y - y0) * words + (x - x0) / 64, 1u64 << ((x - x0) % 64));
+        let new = seen[k] & bit == 0;
+        seen[k] |= bit;
+        new
+    };
+    mark(sx, sy);
+    let mut next = 0;
+    while let Some(&(x, y)) = blob.get(next) {
+        next += 1;
+        if x == x0 || y == y0 || x == x1 || y == y1 || blob.len() > max_count {
+            return None;
+        }
+        for (nx, ny) in [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)] {
+            if data[ny * w + nx] >= level && mark(nx, ny) {
+                blob.push((nx, ny));
+            }
+        }
+    }
+    Some(blob)
+}
+
+/// How far from its candidate [`split_chain`] looks for a chain's pixels:
+/// two pin diameters, px.
+fn chain_reach_px(pin_area_px: f32) -> usize {
+    (4.0 * (pin_area_px as f64 / std::f64::consts::PI).sqrt()) as usize + 2
+}
+
+/// Two pins that a blur wider than about half their distance ran into one
+/// blob without a neck, which at half maximum also runs into its
+/// neighbours (a press squeezes pins together; [`split_chain`] needs the
+/// blob apart and necked). Above [`BLURRED_PAIR_LEVEL`] of the way from
+/// the local floor `lo` to the blob's top the pair stands alone. Two equal
+/// Gaussian blobs `d` apart, their sum's pixels above that level weighted
+/// by their height above it, have the minor variance of one blob
+/// ([`BLURRED_PAIR_MINOR`] sigma^2) and a major variance that grows with
+/// d / sigma ([`BLURRED_PAIR_ELONGATION`]): from the blob's elongation and
+/// minor variance, d. The blob must be Gaussian-like
+/// ([`BLURRED_PAIR_MAX_FILL`]) and cover about two pins' area
+/// ([`BLURRED_PAIR_PINS`] of `pin_area_px`, a pin's effective area at half
+/// maximum). The pins are placed along the major axis, d apart, about the
+/// weighted centroid, each then centred with the other taken off
+/// ([`BLURRED_PAIR_PASSES`]).
+/// Only a pair between `near_px` and `far_px` apart, before and after,
+/// is kept (the lattice's [`BLURRED_PAIR_PITCHES`]).
+fn split_blurred_pair(
+    frame: &GreyFrame,
+    at: PointPx,
+    lo: f32,
+    half_maximum: u8,
+    pin_area_px: f32,
+    (near_px, far_px): (f64, f64),
+) -> Option<[PointPx; 2]> {
+    let (w, h) = (frame.width(), frame.height());
+    let data = frame.data();
+    if !(at.x >= 0.0 && at.y >= 0.0) || pin_area_px <= 0.0 {
+        return None;
+    }
+    let (sx, sy) = ((at.x + 0.5) as usize, (at.y + 0.5) as usize);
+    if sx < 2 || sy < 2 || sx + 2 >= w || sy + 2 >= h {
+        return None;
+    }
+    if data[sy * w + sx] < half_maximum {
+        return None;
+    }
+    let peak = (sy - 2..=sy + 2)
+        .flat_map(|y| (sx - 2..=sx + 2).map(move |x| data[y * w + x]))
+        .max()? as f32;
+    let level = (lo + BLURRED_PAIR_LEVEL * (peak - lo))
+        .ceil()
+        .clamp(1.0, 255.0) as u8;
+    // Most candidates are one round pin: its chords are alike.
+    let (long, across) = longest_chord_px(frame, (sx, sy), level, chain_reach_px(pin_area_px));
+    if long < BLURRED_PAIR_CHORD_RATIO * across {
+        return None;
+    }
+    let blob = fill_blob(frame, (sx, sy), level, pin_area_px)?;
+    let (mut sw, mut mx, mut my) = (0.0, 0.0, 0.0);
+    let mut top = level;
+    for &(x, y) in &blob {
+        let v = data[y * w + x];
+        top = top.max(v);
+        let wt = (v - level) as f64;
+        (sw, mx, my) = (sw + wt, mx + wt * x as f64, my + wt * y as f64);
+    }
+    if sw <= 0.0 || top <= level {
+        return None;
+    }
+    // A flat top (clipped or binarised pins) is no Gaussian.
+    let height = (top - level) as f64;
+    if sw / (blob.len() as f64 * height) > BLURRED_PAIR_MAX_FILL {
+        return None;
+    }
+    // About two pins' area: a Gaussian's effective area above this level
+    // is GAUSSIAN_AREA_RATIO times that above half maximum.
+    let pins = sw / height / (GAUSSIAN_AREA_RATIO * pin_area_px as f64);
+    let (fewest, most) = BLURRED_PAIR_PINS;
+    if !(pins >= fewest && pins <= most) {
+        return None;
+    }
+    let (mx, my) = (mx / sw, my / sw);
+    let (mut a, mut b, mut c) = (0.0, 0.0, 0.0);
+    for &(x, y) in &blob {
+        let wt = (data[y * w + x] - level) as f64;
+        let (dx, dy) = (x as f64 - mx, y as f64 - my);
+        (a, b, c) = (a + wt * dx * dx, b + wt * dx * dy, c + wt * dy * dy);
+    }
+    let (a, b, c) = (a / sw, b / sw, c / sw);
+    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (major, minor) = (0.5 * (a + c) + root, 0.5 * (a + c) - root);
+    if minor <= 0.0 {
+        return None;
+    }
+    // d / sigma from the elongation (the table rises steadily).
+    let elongation = major / minor;
+    let table = &BLURRED_PAIR_ELONGATION;
+    let i = table
+        .windows(2)
+        .position(|p| elongation >= p[0].1 && elongation < p[1].1)?;
+    // Only a blob that is not apart at half maximum (the last test: most
+    // blobs are one round pin, refused above at less cost).
+    if fill_blob(frame, (sx, sy), half_maximum, pin_area_px).is_some() {
+        return None;
+    }
+    let ((r0, e0), (r1, e1)) = (table[i], table[i + 1]);
+    let ratio = r0 + (r1 - r0) * (elongation - e0) / (e1 - e0);
+    let d = ratio * (minor / BLURRED_PAIR_MINOR).sqrt();
+    let apart = |d: f64| d >= near_px && d < far_px;
+    if !apart(d) {
+        return None;
+    }
+    let (ex, ey) = if b.abs() > 1e-12 {
+        (major - c, b)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let norm = ex.hypot(ey);
+    let (ex, ey) = (ex / norm, ey / norm);
+    // Each pin from the blob less the other: two equal pins sit d / 2
+    // either side of the centroid; unequal ones do not, and shrink the
+    // elongation. Each pin's height (the 3 x 3 means there, less the
+    // other's tail), then its Gaussian-weighted centroid within sigma of
+    // it of the frame less the other pin, a few times.
+    let sigma2 = minor / BLURRED_PAIR_MINOR;
+    let mut p = [
+        (mx - 0.5 * d * ex, my - 0.5 * d * ey),
+        (mx + 0.5 * d * ex, my + 0.5 * d * ey),
+    ];
+    let tail = |a: (f64, f64), b: (f64, f64)| {
+        (-((a.0 - b.0).powi(2) + (a.1 - b.1).powi(2)) / (2.0 * sigma2)).exp()
+    };
+    let above_floor = |(x, y): (f64, f64)| -> f64 {
+        let (x, y) = (x.round(), y.round());
+        if x < 1.0 || y < 1.0 || x + 1.0 >= w as f64 || y + 1.0 >= h as f64 {
+            return 0.0;
+        }
+        let (x, y) = (x as usize, y as usize);
+        let sum: u32 = (y - 1..=y + 1)
+            .flat_map(|yy| data[yy * w + x - 1..=yy * w + x + 1].iter())
+            .map(|&v| v as u32)
+            .sum();
+        sum as f64 / 9.0 - lo as f64
+    };
+    let reach = sigma2.sqrt();
+    for _ in 0..BLURRED_PAIR_PASSES {
+        let g = tail(p[0], p[1]);
+        let (h0, h1) = (above_floor(p[0]), above_floor(p[1]));
+        let split = (1.0 - g * g).max(1e-3);
+        let heights = [
+            ((h0 - g * h1) / split).max(1.0),
+            ((h1 - g * h0) / split).max(1.0),
+        ];
+        let mut next = p;
+        for i in 0..2 {
+            let (other, a_other) = (p[1 - i], heights[1 - i]);
+            let (cx, cy) = p[i];
+            let (x0, x1) = (
+                (cx - reach).ceil().max(0.0) as usize,
+                ((cx + reach).floor() as usize).min(w - 1),
+            );
+            let (y0, y1) = (
+                (cy - reach).ceil().max(0.0) as usize,
+                ((cy + reach).floor() as usize).min(h - 1),
+            );
+            // The Gaussians are separable: one exp per row and column.
+            let along = |v0: usize, v1: usize, c: f64| -> Vec<f64> {
+                (v0..=v1)
+                    .map(|v| (-(v as f64 - c).powi(2) / (2.0 * sigma2)).exp())
+                    .collect()
+            };
+            let (near_x, near_y) = (along(x0, x1, cx), along(y0, y1, cy));
+            let (other_x, other_y) = (along(x0, x1, other.0), along(y0, y1, other.1));
+            let (mut weight, mut sum_x, mut sum_y) = (0.0, 0.0, 0.0);
+            for (j, y) in (y0..=y1).enumerate() {
+                for (i, x) in (x0..=x1).enumerate() {
+                    let near = near_x[i] * near_y[j];
+                    if near < BLURRED_PAIR_WINDOW {
+                        continue;
+                    }
+                    let own =
+                        data[y * w + x] as f64 - lo as f64 - a_other * other_x[i] * other_y[j];
+                    let wt = own.max(0.0) * near;
+                    (weight, sum_x, sum_y) =
+                        (weight + wt, sum_x + wt * x as f64, sum_y + wt * y as f64);
+                }
+            }
+            // A Gaussian weighted by a Gaussian window as wide centres half
+            // way between the window and itself.
+            if weight > 0.0 {
+                next[i] = (2.0 * sum_x / weight - cx, 2.0 * sum_y / weight - cy);
+            }
+        }
+        p = next;
+    }
+    apart((p[0].0 - p[1].0).hypot(p[0].1 - p[1].1)).then(|| p.map(|(x, y)| PointPx::new(x, y)))
+}
+
+/// A pair [`split_blurred_pair`] finds is two pins only when its
+/// distance lies in this range of lattice pitches: a press squeezes pins
+/// together (to 0.55-0.9 pitches on the other renderer's domes), and a
+/// pair closer than half a pitch is one elongated marker (GelSlim's dots
+/// next to a press: 0.4).
+const BLURRED_PAIR_PITCHES: (f64, f64) = (0.5, 1.0);
+/// [`split_blurred_pair`]: the blob's mean height above its level is at
+/// most this fraction of its top's (a Gaussian's 0.49, a pair's 0.46-0.56,
+/// a pin's disc blurred by 1-3 px 0.47-0.55; a flat top's 1).
+const BLURRED_PAIR_MAX_FILL: f64 = 0.65;
+/// [`split_blurred_pair`]: passes of each pin's centroid with the other
+/// taken off (on two Gaussian pins 2.1 sigma apart, one 1.4 times as
+/// high as the other, the dimmer one 1.26, 0.96, 0.75 and 0.34 px off
+/// after 2, 3, 4 and 6 passes)...
+const BLURRED_PAIR_PASSES: usize = 4;
+/// ... over the pixels within one sigma of it (the weight exp(-1/2)).
+const BLURRED_PAIR_WINDOW: f64 = 0.606;
+/// A Gaussian blob's effective area (each pixel's height above the level
+/// over the top's, summed) above [`BLURRED_PAIR_LEVEL`] over that above
+/// half maximum.
+const GAUSSIAN_AREA_RATIO: f64 = 0.446;
+/// [`split_blurred_pair`]: a pair covers this many pins' effective area
+/// (the frame's median followed marker's, at half maximum, scaled by
+/// [`GAUSSIAN_AREA_RATIO`]): two Gaussians 1.5-2.6 sigma apart cover
+/// 1.5-3; the followed markers' centroid windows, too small for a blurred
+/// pin, measure its area short (on the other renderer's frames blurred
+/// by 3 px pairs measured 2-3.6, and 4.4 on a test scene).
+const BLURRED_PAIR_PINS: (f64, f64) = (1.5, 5.0);
+/// [`split_blurred_pair`] measures only a blob whose longest chord
+/// through the candidate is this many times the chord across it (two
+/// Gaussians 1.5 sigma apart: 1.5 at the pair's level; one round pin: 1).
+const BLURRED_PAIR_CHORD_RATIO: f64 = 1.3;
+/// [`split_blurred_pair`] looks at the blob above this fraction of the way
+/// from the local floor to its top.
+const BLURRED_PAIR_LEVEL: f32 = 0.75;
+/// [`split_blurred_pair`]: the minor variance of two equal Gaussian blobs
+/// of sigma 1, over the pixels of their sum above [`BLURRED_PAIR_LEVEL`]
+/// of its top, weighted by the height above it (0.093-0.1 for any distance
+/// below 3 sigma; 0.093 for one blob).
+const BLURRED_PAIR_MINOR: f64 = 0.093;
+/// [`split_blurred_pair`]: (d / sigma, major over minor variance) of two
+/// equal Gaussian blobs d apart, measured as for [`BLURRED_PAIR_MINOR`]
+/// (numerically, on a grid of sigma / 8). From 1.5 sigma (closer pins are
+/// one blob to any measure) to 2.6, past which the blob has a neck at half
+/// maximum, or falls apart at this level.
+const BLURRED_PAIR_ELONGATION: [(f64, f64); 12] = [
+    (1.5, 2.120),
+    (1.6, 2.405),
+    (1.7, 2.807),
+    (1.8, 3.310),
+    (1.9, 3.928),
+    (2.0, 4.675),
+    (2.1, 5.589),
+    (2.2, 6.738),
+    (2.3, 8.150),
+    (2.4, 9.977),
+    (2.5, 12.150),
+    (2.6, 14.505),
+];
+
 /// Whether the chords through pixel `at` (the pixels at or above `level`,
 /// along four directions, each way at most `reach` px) may cross a chain
 /// of pins of `diameter_px`: most
@@ -1908,11 +2226,24 @@ fn split_chain(
 /// ([`CHAIN_MIN_CHORD`], [`CHAIN_CHORD_RATIO`]).
 fn chord_says_chain(
     frame: &GreyFrame,
-    (sx, sy): (usize, usize),
+    at: (usize, usize),
     level: u8,
     diameter_px: f64,
     reach: usize,
 ) -> bool {
+    let (long, across) = longest_chord_px(frame, at, level, reach);
+    long >= CHAIN_MIN_CHORD * diameter_px && long >= CHAIN_CHORD_RATIO * across
+}
+
+/// The longest of the chords through pixel `(sx, sy)` along four
+/// directions (the pixels at or above `level`, each way at most `reach`
+/// px), and the chord across it, px.
+fn longest_chord_px(
+    frame: &GreyFrame,
+    (sx, sy): (usize, usize),
+    level: u8,
+    reach: usize,
+) -> (f64, f64) {
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let data = frame.data();
     let (sx, sy, reach) = (sx as i64, sy as i64, reach as i64);
@@ -1927,11 +2258,9 @@ fn chord_says_chain(
         };
         (1 + run(1) + run(-1)) as f64 * ((dx * dx + dy * dy) as f64).sqrt()
     });
-    // The longest chord, and the one across it (the directions come in
-    // perpendicular pairs).
+    // The directions come in perpendicular pairs.
     let long = (0..4).fold(0, |b, i| if chords_px[i] > chords_px[b] { i } else { b });
-    chords_px[long] >= CHAIN_MIN_CHORD * diameter_px
-        && chords_px[long] >= CHAIN_CHORD_RATIO * chords_px[long ^ 1]
+    (chords_px[long], chords_px[long ^ 1])
 }
 
 /// [`split_chain`]: a blob of 2 and of 3 pins covers this many pin areas
@@ -3364,6 +3693,149 @@ mod tests {
                 .fold(f64::INFINITY, f64::min);
             assert!(
                 off < 0.5,
+                "pin {k} at {:?}: nearest marker {off:.2} px",
+                pins[k]
+            );
+        }
+        assert_eq!(found.len() + 1, cal.rest_markers.len());
+    }
+
+    #[test]
+    fn a_blurred_pair_among_close_neighbours_is_split_and_a_flat_topped_one_is_not() {
+        // A 64 x 64 frame of level 30 with Gaussian blobs (sigma 3.2 px)
+        // `(centre, height)`, clipped at 255.
+        let blobs = |list: &[(PointPx, f64)]| {
+            let data = (0..64 * 64)
+                .map(|k| {
+                    let (x, y) = ((k % 64) as f64, (k / 64) as f64);
+                    let v: f64 = list
+                        .iter()
+                        .map(|&(c, a)| {
+                            a * (-((x - c.x).powi(2) + (y - c.y).powi(2)) / (2.0 * 3.2 * 3.2)).exp()
+                        })
+                        .sum();
+                    (30.0 + v).round().min(255.0) as u8
+                })
+                .collect();
+            GreyFrame::new(64, 64, data).unwrap()
+        };
+        // Two pins 6.8 px apart (2.1 sigma) along a slope, each with a
+        // neighbour 9.5 px across the slope: at half maximum the pair runs
+        // into them, above three quarters of its top it stands alone.
+        let (ex, ey) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let at = |t: f64, n: f64| PointPx::new(32.3 + t * ex - n * ey, 31.8 + t * ey + n * ex);
+        let pair = [at(-3.4, 0.0), at(3.4, 0.0)];
+        let neighbours = [at(-3.4, 9.5), at(3.4, 9.5), at(-3.4, -9.5), at(3.4, -9.5)];
+        let scene = |heights: [f64; 2], scale: f64| {
+            let mut list: Vec<(PointPx, f64)> =
+                neighbours.iter().map(|&c| (c, 130.0 * scale)).collect();
+            list.extend(pair.iter().zip(heights).map(|(&c, a)| (c, a * scale)));
+            blobs(&list)
+        };
+        let centre = at(0.0, 0.0);
+        // A lattice pitch of 10 px.
+        let (lo, pin_area_px, range_px) = (30.0, 25.0, (5.0, 10.0));
+        // (One between them is 3.4 px from each.)
+        for (heights, bound_px) in [([130.0, 130.0], 0.35), ([150.0, 110.0], 0.8)] {
+            let frame = scene(heights, 1.0);
+            let half = (30.0 + 0.5 * frame.data()[32 * 64 + 32] as f32 - 15.0) as u8;
+            assert_eq!(split_chain(&frame, centre, half, pin_area_px), None);
+            let got = split_blurred_pair(&frame, centre, lo, half, pin_area_px, range_px)
+                .unwrap_or_else(|| panic!("{heights:?}: no pair"));
+            for (g, want) in got.iter().zip(pair) {
+                let off = (g.x - want.x).hypot(g.y - want.y);
+                assert!(
+                    off < bound_px,
+                    "{heights:?}: {g:?} is {off:.2} px from {want:?}"
+                );
+            }
+            // Alone, the pair is a blob apart at half maximum: split_chain's.
+            let alone = blobs(
+                &pair
+                    .iter()
+                    .zip(heights)
+                    .map(|(&c, a)| (c, a))
+                    .collect::<Vec<_>>(),
+            );
+            assert_eq!(
+                split_blurred_pair(&alone, centre, lo, half, pin_area_px, range_px),
+                None
+            );
+        }
+        // The same pins five times as bright clip into flat tops: no
+        // Gaussian to measure.
+        let clipped = scene([130.0, 130.0], 5.0);
+        assert_eq!(
+            split_blurred_pair(&clipped, centre, lo, 142, pin_area_px, range_px),
+            None
+        );
+    }
+
+    #[test]
+    fn pins_a_press_squeezed_into_one_blurred_blob_are_each_found() {
+        // Pins of radius 3 px, 170 over a skin of 30, at a pitch of 12 px;
+        // the rest blurred by 1 px, the frame by 3 px (the upper
+        // end). A press hides the pin under it and pushes the two pins
+        // above it, and the two below, 2.4 px towards each other: 7.2 px
+        // apart, about twice the sigma of their blurred profile, each pair
+        // is one blob without a neck, which at half maximum also runs into
+        // its neighbours. Following sees one blob; the DoH one marker
+        // between the two pins.
+        let (w, h, pitch) = (360, 360, 12.0);
+        let rest_pins = test_fixtures::hex_points(w, h, pitch);
+        let draw = |pins: &[PointPx], blur_px: f64| {
+            let data = (0..w * h)
+                .map(|i| {
+                    let (x, y) = ((i % w) as f64, (i / w) as f64);
+                    let on = pins.iter().any(|p| (p.x - x).hypot(p.y - y) <= 3.0);
+                    if on {
+                        170
+                    } else {
+                        30
+                    }
+                })
+                .collect();
+            GreyFrame::new(w, h, data).unwrap().blurred(blur_px)
+        };
+        let nearest = |q: PointPx| {
+            let d = |k: usize| (rest_pins[k].x - q.x).hypot(rest_pins[k].y - q.y);
+            (0..rest_pins.len())
+                .min_by(|&a, &b| d(a).total_cmp(&d(b)))
+                .unwrap()
+        };
+        let mut pins = rest_pins.clone();
+        let pressed = nearest(PointPx::new(180.0, 180.0));
+        let c = rest_pins[pressed];
+        let mut moved = Vec::new();
+        for dy in [-1.0, 1.0] {
+            let row = 0.75f64.sqrt() * pitch * dy;
+            let left = nearest(PointPx::new(c.x - 0.5 * pitch, c.y + row));
+            let right = nearest(PointPx::new(c.x + 0.5 * pitch, c.y + row));
+            pins[left].x += 2.4;
+            pins[right].x -= 2.4;
+            moved.extend([left, right]);
+        }
+        let params = crate::params::Params::default();
+        let rest = draw(&rest_pins, 1.0);
+        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest), &params).unwrap();
+        let mut shown = pins.clone();
+        shown.remove(pressed);
+        let (found, search) = follow_or_search(
+            &draw(&shown, 3.0),
+            &cal.detector,
+            &cal.reference(),
+            0.3 * cal.pitch_px,
+            Some(cal.pitch_px),
+        );
+        assert_eq!(search, Search::Local);
+        let found = found.positions();
+        for &k in &moved {
+            let off = found
+                .iter()
+                .map(|f| (f.x - pins[k].x).hypot(f.y - pins[k].y))
+                .fold(f64::INFINITY, f64::min);
+            assert!(
+                off < 0.75,
                 "pin {k} at {:?}: nearest marker {off:.2} px",
                 pins[k]
             );
