@@ -533,8 +533,9 @@ fn finish(
     // inwards by up to a radius: spacings that shrink towards the frame's
     // edge, as a dome's do towards its rim. Only the uncut ones tell the
     // skin's shape (a flat GelSight Mini was taken for a dome with its rim
-    // at 62 degrees).
-    let reach_px = detector.radius_px + 2.0;
+    // at 62 degrees). A marker is cut when the frame's edge clips its
+    // centroid window.
+    let reach_px = markers::window_reach_px(detector.radius_px) as f64;
     let uncut: Vec<PointPx> = rest_markers
         .iter()
         .copied()

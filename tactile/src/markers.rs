@@ -2907,7 +2907,7 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 
 /// How far [`refine`]'s window reaches either side of its centre for a
 /// marker of `radius_px`, px.
-fn window_reach_px(radius_px: f64) -> i64 {
+pub(crate) fn window_reach_px(radius_px: f64) -> i64 {
     radius_px.ceil() as i64 + 2
 }
 
