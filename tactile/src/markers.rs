@@ -3638,21 +3638,52 @@ mod tests {
         // pair runs into one plateau (centres 9 px apart), which following
         // sees as one blob. Without the split, one pin of a pair is 16 px
         // from the nearest marker.
-        let (w, h, pitch) = (420, 420, 18.0);
+        squeezed_pairs_are_found(SqueezedPairs {
+            size: 420,
+            pitch_px: 18.0,
+            radius_px: 6.0,
+            top: 255,
+            push_px: 4.5,
+            blur_px: 1.0,
+            within_px: 0.5,
+        });
+    }
+
+    /// A hex lattice of disc pins (`radius_px`, level `top` over a skin of
+    /// 30) at `pitch_px` in a `size` x `size` frame, and a press at its
+    /// middle that hides the pin under it and pushes the two pins above
+    /// it, and the two below, `push_px` towards each other. The rest is
+    /// blurred by 1 px, the frame by `blur_px`.
+    struct SqueezedPairs {
+        size: usize,
+        pitch_px: f64,
+        radius_px: f64,
+        top: u8,
+        push_px: f64,
+        blur_px: f64,
+        within_px: f64,
+    }
+
+    /// Following with the local search finds each pushed pin of `scene`
+    /// within its `within_px`, and a marker for every other pin.
+    fn squeezed_pairs_are_found(scene: SqueezedPairs) {
+        let (w, h, pitch) = (scene.size, scene.size, scene.pitch_px);
         let rest_pins = test_fixtures::hex_points(w, h, pitch);
-        let draw = |pins: &[PointPx]| {
+        let draw = |pins: &[PointPx], blur_px: f64| {
             let data = (0..w * h)
                 .map(|i| {
                     let (x, y) = ((i % w) as f64, (i / w) as f64);
-                    let on = pins.iter().any(|p| (p.x - x).hypot(p.y - y) <= 6.0);
+                    let on = pins
+                        .iter()
+                        .any(|p| (p.x - x).hypot(p.y - y) <= scene.radius_px);
                     if on {
-                        255
+                        scene.top
                     } else {
                         30
                     }
                 })
                 .collect();
-            GreyFrame::new(w, h, data).unwrap().blurred(1.0)
+            GreyFrame::new(w, h, data).unwrap().blurred(blur_px)
         };
         let nearest = |q: PointPx| {
             let d = |k: usize| (rest_pins[k].x - q.x).hypot(rest_pins[k].y - q.y);
@@ -3661,24 +3692,25 @@ mod tests {
                 .unwrap()
         };
         let mut pins = rest_pins.clone();
-        let pressed = nearest(PointPx::new(210.0, 210.0));
+        let middle = w as f64 / 2.0;
+        let pressed = nearest(PointPx::new(middle, middle));
         let c = rest_pins[pressed];
         let mut moved = Vec::new();
         for dy in [-1.0, 1.0] {
             let row = 0.75f64.sqrt() * pitch * dy;
             let left = nearest(PointPx::new(c.x - 0.5 * pitch, c.y + row));
             let right = nearest(PointPx::new(c.x + 0.5 * pitch, c.y + row));
-            pins[left].x += 4.5;
-            pins[right].x -= 4.5;
+            pins[left].x += scene.push_px;
+            pins[right].x -= scene.push_px;
             moved.extend([left, right]);
         }
         let params = crate::params::Params::default();
-        let rest = draw(&rest_pins);
+        let rest = draw(&rest_pins, 1.0);
         let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest), &params).unwrap();
         let mut shown = pins.clone();
         shown.remove(pressed);
         let (found, search) = follow_or_search(
-            &draw(&shown),
+            &draw(&shown, scene.blur_px),
             &cal.detector,
             &cal.reference(),
             0.3 * cal.pitch_px,
@@ -3692,7 +3724,7 @@ mod tests {
                 .map(|f| (f.x - pins[k].x).hypot(f.y - pins[k].y))
                 .fold(f64::INFINITY, f64::min);
             assert!(
-                off < 0.5,
+                off < scene.within_px,
                 "pin {k} at {:?}: nearest marker {off:.2} px",
                 pins[k]
             );
@@ -3781,66 +3813,15 @@ mod tests {
         // is one blob without a neck, which at half maximum also runs into
         // its neighbours. Following sees one blob; the DoH one marker
         // between the two pins.
-        let (w, h, pitch) = (360, 360, 12.0);
-        let rest_pins = test_fixtures::hex_points(w, h, pitch);
-        let draw = |pins: &[PointPx], blur_px: f64| {
-            let data = (0..w * h)
-                .map(|i| {
-                    let (x, y) = ((i % w) as f64, (i / w) as f64);
-                    let on = pins.iter().any(|p| (p.x - x).hypot(p.y - y) <= 3.0);
-                    if on {
-                        170
-                    } else {
-                        30
-                    }
-                })
-                .collect();
-            GreyFrame::new(w, h, data).unwrap().blurred(blur_px)
-        };
-        let nearest = |q: PointPx| {
-            let d = |k: usize| (rest_pins[k].x - q.x).hypot(rest_pins[k].y - q.y);
-            (0..rest_pins.len())
-                .min_by(|&a, &b| d(a).total_cmp(&d(b)))
-                .unwrap()
-        };
-        let mut pins = rest_pins.clone();
-        let pressed = nearest(PointPx::new(180.0, 180.0));
-        let c = rest_pins[pressed];
-        let mut moved = Vec::new();
-        for dy in [-1.0, 1.0] {
-            let row = 0.75f64.sqrt() * pitch * dy;
-            let left = nearest(PointPx::new(c.x - 0.5 * pitch, c.y + row));
-            let right = nearest(PointPx::new(c.x + 0.5 * pitch, c.y + row));
-            pins[left].x += 2.4;
-            pins[right].x -= 2.4;
-            moved.extend([left, right]);
-        }
-        let params = crate::params::Params::default();
-        let rest = draw(&rest_pins, 1.0);
-        let cal = crate::calibrate::calibrate(std::slice::from_ref(&rest), &params).unwrap();
-        let mut shown = pins.clone();
-        shown.remove(pressed);
-        let (found, search) = follow_or_search(
-            &draw(&shown, 3.0),
-            &cal.detector,
-            &cal.reference(),
-            0.3 * cal.pitch_px,
-            Some(cal.pitch_px),
-        );
-        assert_eq!(search, Search::Local);
-        let found = found.positions();
-        for &k in &moved {
-            let off = found
-                .iter()
-                .map(|f| (f.x - pins[k].x).hypot(f.y - pins[k].y))
-                .fold(f64::INFINITY, f64::min);
-            assert!(
-                off < 0.75,
-                "pin {k} at {:?}: nearest marker {off:.2} px",
-                pins[k]
-            );
-        }
-        assert_eq!(found.len() + 1, cal.rest_markers.len());
+        squeezed_pairs_are_found(SqueezedPairs {
+            size: 360,
+            pitch_px: 12.0,
+            radius_px: 3.0,
+            top: 170,
+            push_px: 2.4,
+            blur_px: 3.0,
+            within_px: 0.75,
+        });
     }
 
     #[test]
