@@ -1854,9 +1854,7 @@ fn split_chain(
         let (dx, dy) = (x - mx, y - my);
         (a, b, c) = (a + dx * dx, b + dx * dy, c + dy * dy);
     }
-    let (a, b, c) = (a / count, b / count, c / count);
-    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-    let (major, minor) = (0.5 * (a + c) + root, 0.5 * (a + c) - root);
+    let (major, minor, (ex, ey)) = principal_axes(a / count, b / count, c / count);
     let k = (2..)
         .zip(CHAIN_ELONGATION)
         .find_map(|(k, (lo, hi))| (major >= lo * minor && major < hi * minor).then_some(k))?;
@@ -1865,16 +1863,6 @@ fn split_chain(
     if !(pins >= lo as f64 && pins <= hi as f64) {
         return None;
     }
-    // The major axis: the eigenvector of (a b; b c) for `major`.
-    let (ex, ey) = if b.abs() > 1e-12 {
-        (major - c, b)
-    } else if a >= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
-    let norm = ex.hypot(ey);
-    let (ex, ey) = (ex / norm, ey / norm);
     let kf = k as f64;
     let d = (12.0 * (major - minor) / (kf * kf - 1.0)).sqrt();
     // Along the axis, pin i sits at t = (i - (k - 1)/2) d from the
@@ -1900,6 +1888,23 @@ fn split_chain(
             .map(|i| PointPx::new(cx + at_pin(i) * ex, cy + at_pin(i) * ey))
             .collect(),
     )
+}
+
+/// The major and minor variance of the second moments `(a b; b c)` (a is
+/// x x, c is y y), and the major axis (a unit vector).
+fn principal_axes(a: f64, b: f64, c: f64) -> (f64, f64, (f64, f64)) {
+    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
+    let (major, minor) = (0.5 * (a + c) + root, 0.5 * (a + c) - root);
+    // The eigenvector of (a b; b c) for `major`.
+    let (ex, ey) = if b.abs() > 1e-12 {
+        (major - c, b)
+    } else if a >= c {
+        (1.0, 0.0)
+    } else {
+        (0.0, 1.0)
+    };
+    let norm = ex.hypot(ey);
+    (major, minor, (ex / norm, ey / norm))
 }
 
 /// The pixels at or above `level` 4-connected to `(sx, sy)`, within two pin
@@ -2044,9 +2049,7 @@ fn split_blurred_pair(
         let (dx, dy) = (x as f64 - mx, y as f64 - my);
         (a, b, c) = (a + wt * dx * dx, b + wt * dx * dy, c + wt * dy * dy);
     }
-    let (a, b, c) = (a / sw, b / sw, c / sw);
-    let root = (0.25 * (a - c) * (a - c) + b * b).sqrt();
-    let (major, minor) = (0.5 * (a + c) + root, 0.5 * (a + c) - root);
+    let (major, minor, (ex, ey)) = principal_axes(a / sw, b / sw, c / sw);
     if minor <= 0.0 {
         return None;
     }
@@ -2068,15 +2071,6 @@ fn split_blurred_pair(
     if !apart(d) {
         return None;
     }
-    let (ex, ey) = if b.abs() > 1e-12 {
-        (major - c, b)
-    } else if a >= c {
-        (1.0, 0.0)
-    } else {
-        (0.0, 1.0)
-    };
-    let norm = ex.hypot(ey);
-    let (ex, ey) = (ex / norm, ey / norm);
     // Each pin from the blob less the other: two equal pins sit d / 2
     // either side of the centroid; unequal ones do not, and shrink the
     // elongation. Each pin's height (the 3 x 3 means there, less the
