@@ -200,7 +200,8 @@ def dark_dots(grey, level: float, min_area_px: int):
 
 
 def ball_centre(img, ref) -> tuple[float, float, int]:
-    """The ball imprint of a GelSlim press: centroid of the largest region whose
+    """The imprint of a press on a colour-lit gel (a GelSlim ball press, a
+    GelSight Mini finger): centroid and area of the largest region whose
     shading differs from the reference (summed |RGB| difference of the
     sigma-3-blurred frames > 25)."""
     import cv2

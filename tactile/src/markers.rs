@@ -325,7 +325,7 @@ struct PinScale {
     pitch_px: f64,
 }
 
-/// [`detect_in`], and with `pins` (a pin's effective area in this frame,
+/// [`detect_in`], and with `scale` (a pin's effective area in this frame,
 /// the lattice pitch) a candidate whose blob holds two or three touching
 /// pins ([`split_chain`]), or two that a blur ran into one blob
 /// ([`split_blurred_pair`]), gives those, in `chains`, instead of one
@@ -335,7 +335,7 @@ fn detect_split_in(
     det: &Detector,
     window: [usize; 4],
     typical_range: Option<f32>,
-    pins: Option<PinScale>,
+    scale: Option<PinScale>,
     chains: &mut Vec<Vec<Marker>>,
 ) -> Vec<Marker> {
     let (fw, fh) = (frame.width(), frame.height());
@@ -413,7 +413,7 @@ fn detect_split_in(
         if let Some(PinScale {
             area_px: pin_area_px,
             pitch_px,
-        }) = pins.filter(|_| det.may_hold(guess))
+        }) = scale.filter(|_| det.may_hold(guess))
         {
             let blob = refine(frame, guess, det.radius_px, det.min_contrast);
             first_centroid = Some((guess, blob));
