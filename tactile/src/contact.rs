@@ -166,6 +166,18 @@ pub fn segment(
     params: &ContactParams,
     mm_per_px: f64,
 ) -> Option<Region> {
+    segment_supported(map, reference, params, mm_per_px, &[])
+}
+
+/// [`segment`] among the regions that reach a cell of `support` (row-major
+/// on the map's grid, [`support_cells`]; empty: every region counts).
+pub fn segment_supported(
+    map: &DensityMap,
+    reference: &DensityReference,
+    params: &ContactParams,
+    mm_per_px: f64,
+    support: &[bool],
+) -> Option<Region> {
     let DensityReference {
         rest,
         mask,
@@ -214,6 +226,7 @@ pub fn segment(
             seen[k] = true;
             stack.push((i, j));
             let mut count = 0;
+            let mut supported = support.is_empty();
             let mut low = ((i, j), score(i, j));
             flood_cells.clear();
             while let Some((ci, cj)) = stack.pop() {
@@ -221,6 +234,7 @@ pub fn segment(
                 if s < limit {
                     count += 1;
                 }
+                supported = supported || support.get(cj * g.nx + ci).copied().unwrap_or(false);
                 flood_cells.push((ci, cj));
                 if s < low.1 {
                     low = ((ci, cj), s);
@@ -241,7 +255,7 @@ pub fn segment(
                     }
                 }
             }
-            if best.as_ref().is_none_or(|b| count > b.cells) {
+            if supported && best.as_ref().is_none_or(|b| count > b.cells) {
                 best = Some(Flood {
                     cells: count,
                     low: low.0,
@@ -549,6 +563,46 @@ pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usiz
             // later stages reject it).
             (d2 > strong2 || d2.is_nan()).then_some(n)
         })
+}
+
+/// The cells of `grid` whose samples lie within `reach_px` of the rest
+/// place of a strongly moved marker ([`strongly_moved`]; each place taken
+/// at its nearest sample): the support a density region needs to be a
+/// press ([`segment_supported`]). The markers a press moves away from its
+/// dent rested in or beside it; a dent that no such marker borders is
+/// markers lost or found apart from any press (a rim pin the frame's mask
+/// cut off as the skin sheared: franka's real taps, BENCHMARKS.md, session
+/// 22).
+pub fn support_cells(
+    grid: &crate::density::Grid,
+    rest: &[PointPx],
+    field: &Field,
+    pitch_px: f64,
+    reach_px: f64,
+) -> Vec<bool> {
+    let (nx, ny) = (grid.nx as i64, grid.ny as i64);
+    let mut support = vec![false; grid.nx * grid.ny];
+    let step = grid.step_px as f64;
+    let reach_cells = (reach_px / step).max(0.0);
+    let r = reach_cells.floor() as i64;
+    let disc: Vec<(i64, i64)> = (-r..=r)
+        .flat_map(|dj| (-r..=r).map(move |di| (di, dj)))
+        .filter(|&(di, dj)| ((di * di + dj * dj) as f64) <= reach_cells * reach_cells)
+        .collect();
+    let cell = |v: f64| ((v - (step - 1.0) / 2.0) / step).round();
+    for n in strongly_moved(field, pitch_px) {
+        let Some(&p) = rest.get(n).filter(|p| p.is_finite()) else {
+            continue;
+        };
+        let (ci, cj) = (cell(p.x) as i64, cell(p.y) as i64);
+        for &(di, dj) in &disc {
+            let (i, j) = (ci + di, cj + dj);
+            if (0..nx).contains(&i) && (0..ny).contains(&j) {
+                support[(j * nx + i) as usize] = true;
+            }
+        }
+    }
+    support
 }
 
 /// True when the field may hold a contact: some marker moved strongly
@@ -952,6 +1006,86 @@ mod tests {
         .unwrap();
         assert!(is_dent(&dent, 8, 15.0, pitch), "{dent:?}");
         assert!(dist(dent.centre, c) < 0.5 * pitch, "{dent:?}");
+    }
+
+    #[test]
+    fn a_hole_no_moved_marker_borders_is_no_press_when_a_supported_dent_exists() {
+        // Real franka taps: a sheared skin leaves a rim pin outside the
+        // frame's mask. Its hole in the density was the largest region, far
+        // from the press whose markers moved.
+        use crate::density::{self, DensitySetup};
+        use crate::params::DensityMode;
+        let (w, h, pitch) = (300, 300, 30.0);
+        let setup = DensitySetup {
+            width: w,
+            height: h,
+            h_px: 15.0,
+            mm_per_px: 0.1,
+            mode: DensityMode::Fast,
+            step_px: 8,
+            truncate_sigmas: 3.0,
+        };
+        let rest = crate::test_fixtures::hex_points(w, h, pitch);
+        let rest_map = density::estimate(&rest, &setup, None);
+        let mask = vec![true; rest_map.values_per_mm2.len()];
+        let (press, hole) = (PointPx::new(100.0, 100.0), PointPx::new(210.0, 200.0));
+        // The press spreads the markers within 2 pitches of it; the two
+        // markers nearest the hole are lost.
+        let mut nearest_hole: Vec<usize> = (0..rest.len()).collect();
+        nearest_hole.sort_by(|&a, &b| dist(rest[a], hole).total_cmp(&dist(rest[b], hole)));
+        let lost = &nearest_hole[..2];
+        let displacement: Vec<Option<PointPx>> = (0..rest.len())
+            .map(|n| {
+                if lost.contains(&n) {
+                    return None;
+                }
+                let p = rest[n];
+                let r = dist(p, press);
+                let k = if r < 2.0 * pitch {
+                    0.4 * (1.0 - r / (2.0 * pitch))
+                } else {
+                    0.0
+                };
+                Some(PointPx::new(k * (p.x - press.x), k * (p.y - press.y)))
+            })
+            .collect();
+        let now: Vec<PointPx> = rest
+            .iter()
+            .zip(&displacement)
+            .filter_map(|(r, u)| u.map(|u| PointPx::new(r.x + u.x, r.y + u.y)))
+            .collect();
+        let field = Field {
+            moved: (0..rest.len()).collect(),
+            displacement,
+            lost: 2,
+            jitter_px: 0.1,
+            moved_px: 0.6,
+        };
+        let map = density::estimate(&now, &setup, None);
+        let reference = DensityReference::flat(&rest_map, &mask);
+        let largest = segment(&map, &reference, &loose(), 0.1).unwrap();
+        assert!(dist(largest.centre, hole) < pitch, "{largest:?}");
+        let support = support_cells(&map.grid, &rest, &field, pitch, 15.0);
+        let r = segment_supported(&map, &reference, &loose(), 0.1, &support).unwrap();
+        assert!(dist(r.centre, press) < 0.5 * pitch, "{r:?}");
+        // Without the press, the hole alone is no region.
+        let still = Field {
+            displacement: field
+                .displacement
+                .iter()
+                .map(|u| u.map(|_| PointPx::new(0.0, 0.0)))
+                .collect(),
+            ..field
+        };
+        let support = support_cells(&map.grid, &rest, &still, pitch, 15.0);
+        assert!(support.iter().all(|&s| !s));
+        let kept: Vec<PointPx> = (0..rest.len())
+            .filter(|n| !lost.contains(n))
+            .map(|n| rest[n])
+            .collect();
+        let holed = density::estimate(&kept, &setup, None);
+        assert!(segment(&holed, &reference, &loose(), 0.1).is_some());
+        assert!(segment_supported(&holed, &reference, &loose(), 0.1, &support).is_none());
     }
 
     #[test]

@@ -94,7 +94,8 @@ pub struct FrameResult {
     pub blank: bool,
     /// How the markers were found: followed from their rest positions, the
     /// lost ones searched for around theirs, or the whole frame searched
-    /// ([`markers::follow_or_search`]; following off: whole).
+    /// (and its markers paired with the rest markers when the local search
+    /// is on) ([`markers::follow_or_search`]; following off: whole).
     pub search: Search,
     /// Density grid cells computed.
     pub density_cells: usize,
@@ -184,8 +185,9 @@ impl Pipeline {
         }
         let field = match search {
             // Each followed marker knows its rest marker, and so does each
-            // one searched for around the lost ones: no matching.
-            Search::Followed | Search::Local => tracking::track_known_adaptive(
+            // one searched for around the lost ones or paired through its
+            // neighbours: no matching.
+            Search::Followed | Search::Local | Search::Paired => tracking::track_known_adaptive(
                 &cal.rest_markers,
                 markers
                     .list
@@ -237,13 +239,31 @@ impl Pipeline {
             let map = density::estimate(&positions, &cal.density, roi);
             density_cells = map.roi.area();
             t2 = Instant::now();
-            region = contact::segment(&map, &cal.density_reference(), cp, cal.density.mm_per_px)
-                // With the tracked markers at hand, a region narrower than a dent
-                // is theirs to judge; the paper's density-only method keeps it.
-                .filter(|r| {
-                    cp.centre == CentreMethod::Density
-                        || contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px)
-                });
+            // The tracked markers' word on which dents are presses (the
+            // paper's density-only method takes the largest).
+            let support = match cp.centre {
+                CentreMethod::Density => Vec::new(),
+                CentreMethod::Hybrid => contact::support_cells(
+                    &map.grid,
+                    &cal.rest_markers,
+                    &field,
+                    cal.pitch_px,
+                    cal.density.h_px,
+                ),
+            };
+            region = contact::segment_supported(
+                &map,
+                &cal.density_reference(),
+                cp,
+                cal.density.mm_per_px,
+                &support,
+            )
+            // With the tracked markers at hand, a region narrower than a dent
+            // is theirs to judge; the paper's density-only method keeps it.
+            .filter(|r| {
+                cp.centre == CentreMethod::Density
+                    || contact::is_dent(r, map.grid.step_px, cal.density.h_px, cal.pitch_px)
+            });
         }
         let contact = if skipped {
             None
