@@ -1115,8 +1115,9 @@ pub fn follow_or_search(
 /// lost and paired others with a neighbour's pin (BENCHMARKS.md, session
 /// 22).
 ///
-/// The seeds are the rest markers whose nearest detected marker lies within
-/// [`PAIRED_SEED_PITCH`] and has them as its nearest rest marker. Then, in
+/// The seeds: each rest marker is paired with the nearest of the detected
+/// markers within [`PAIRED_SEED_PITCH`] of it whose nearest rest marker it
+/// is. Then, in
 /// rounds, each lost rest marker with at least two paired neighbours
 /// ([`Neighbours`]) is expected where their median displacement puts it
 /// ([`predicted`]), and is paired with the nearest unpaired detected marker
@@ -1137,8 +1138,7 @@ fn pair_detected(
     let at: Vec<PointPx> = detected.iter().map(|m| m.pos).collect();
     let reach_px = PAIRED_REACH_PITCH * pitch_px;
     let seed_px = PAIRED_SEED_PITCH * pitch_px;
-    let index = PointIndex::new(&at, fw, fh, reach_px.max(seed_px));
-    let rest_index = PointIndex::new(near, fw, fh, seed_px);
+    let index = PointIndex::new(&at, fw, fh, reach_px);
     let mut used = vec![false; detected.len()];
     let mut displaced: Vec<Option<PointPx>> = vec![None; near.len()];
     let mut pair = |j: usize, k: usize, used: &mut [bool], displaced: &mut [Option<PointPx>]| {
@@ -1146,12 +1146,20 @@ fn pair_detected(
         displaced[k] = Some(PointPx::new(at[j].x - near[k].x, at[j].y - near[k].y));
         detected[j].followed_from = Some(k);
     };
-    for (k, &r) in near.iter().enumerate() {
-        if let Some((j, _)) = index.nearest(&at, r, seed_px) {
-            let mutual = rest_index.nearest(near, at[j], seed_px).map(|(n, _)| n) == Some(k);
-            if mutual && !used[j] {
-                pair(j, k, &mut used, &mut displaced);
+    // Seeds: each rest marker gets the nearest of the detected markers
+    // within the seed distance whose nearest rest marker it is.
+    let rest_index = PointIndex::new(near, fw, fh, seed_px);
+    let mut seed: Vec<Option<(f64, usize)>> = vec![None; near.len()];
+    for (j, &p) in at.iter().enumerate() {
+        if let Some((k, d)) = rest_index.nearest(near, p, seed_px) {
+            if seed[k].is_none_or(|(best, _)| d < best) {
+                seed[k] = Some((d, j));
             }
+        }
+    }
+    for (k, s) in seed.into_iter().enumerate() {
+        if let Some((_, j)) = s {
+            pair(j, k, &mut used, &mut displaced);
         }
     }
     let own;
@@ -1207,9 +1215,9 @@ fn pair_detected(
     detected
 }
 
-/// [`Search::Paired`] seeds its pairing with the rest markers whose nearest
-/// detected marker is this many pitches from them or less (and theirs is
-/// them): a marker that near has no other pin to be.
+/// [`Search::Paired`] seeds its pairing with the detected markers this many
+/// pitches or less from their nearest rest marker: a marker that near has
+/// no other pin to be.
 pub const PAIRED_SEED_PITCH: f64 = 0.25;
 
 /// [`Search::Paired`] pairs a lost rest marker with a detected marker
@@ -1690,7 +1698,7 @@ fn predicted_from(
     neighbours: &[u32],
     k: usize,
 ) -> Option<PointPx> {
-    const MOST: usize = 32;
+    const MOST: usize = 16;
     let (mut ux, mut uy, mut n) = ([0.0f64; MOST], [0.0f64; MOST], 0);
     for &j in neighbours {
         if let Some(u) = displaced.get(j as usize).copied().flatten() {
