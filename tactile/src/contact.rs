@@ -948,27 +948,39 @@ mod tests {
         assert!(segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).is_none());
     }
 
+    /// A hex lattice of pitch 30 px on a 300 x 300 frame, its density setup
+    /// (h 15 px, step 8 px), its rest density and an all-true mask.
+    fn hex_lattice() -> (
+        crate::density::DensitySetup,
+        f64,
+        Vec<PointPx>,
+        DensityMap,
+        Vec<bool>,
+    ) {
+        let (w, h, pitch) = (300, 300, 30.0);
+        let setup = crate::density::DensitySetup {
+            width: w,
+            height: h,
+            h_px: 15.0,
+            mm_per_px: 0.1,
+            mode: crate::params::DensityMode::Fast,
+            step_px: 8,
+            truncate_sigmas: 3.0,
+        };
+        let rest = crate::test_fixtures::hex_points(w, h, pitch);
+        let rest_map = crate::density::estimate(&rest, &setup, None);
+        let mask = vec![true; rest_map.values_per_mm2.len()];
+        (setup, pitch, rest, rest_map, mask)
+    }
+
     #[test]
     fn a_lattice_ripple_is_no_dent_a_spread_is() {
         // A kernel half the pitch leaves ripples in the density: one marker
         // moved by 0.4 pitch drops a cell or two below 0.80 x rest. A press
         // that spreads the markers within 3 pitches makes a dent wider than
         // the pitch.
-        use crate::density::{self, DensitySetup};
-        use crate::params::DensityMode;
-        let (w, h, pitch) = (300, 300, 30.0);
-        let setup = DensitySetup {
-            width: w,
-            height: h,
-            h_px: 15.0,
-            mm_per_px: 0.1,
-            mode: DensityMode::Fast,
-            step_px: 8,
-            truncate_sigmas: 3.0,
-        };
-        let rest = crate::test_fixtures::hex_points(w, h, pitch);
-        let rest_map = density::estimate(&rest, &setup, None);
-        let mask = vec![true; rest_map.values_per_mm2.len()];
+        use crate::density;
+        let (setup, pitch, rest, rest_map, mask) = hex_lattice();
         let c = PointPx::new(150.0, 150.0);
         let nearest = (0..rest.len())
             .min_by(|&a, &b| dist(rest[a], c).total_cmp(&dist(rest[b], c)))
@@ -1013,21 +1025,8 @@ mod tests {
         // Real franka taps: a sheared skin leaves a rim pin outside the
         // frame's mask. Its hole in the density was the largest region, far
         // from the press whose markers moved.
-        use crate::density::{self, DensitySetup};
-        use crate::params::DensityMode;
-        let (w, h, pitch) = (300, 300, 30.0);
-        let setup = DensitySetup {
-            width: w,
-            height: h,
-            h_px: 15.0,
-            mm_per_px: 0.1,
-            mode: DensityMode::Fast,
-            step_px: 8,
-            truncate_sigmas: 3.0,
-        };
-        let rest = crate::test_fixtures::hex_points(w, h, pitch);
-        let rest_map = density::estimate(&rest, &setup, None);
-        let mask = vec![true; rest_map.values_per_mm2.len()];
+        use crate::density;
+        let (setup, pitch, rest, rest_map, mask) = hex_lattice();
         let (press, hole) = (PointPx::new(100.0, 100.0), PointPx::new(210.0, 200.0));
         // The press spreads the markers within 2 pitches of it; the two
         // markers nearest the hole are lost.

@@ -656,6 +656,17 @@ pub struct Reference<'a> {
     pub neighbours: Option<&'a Neighbours>,
 }
 
+impl Reference<'_> {
+    /// The rest markers' [`Neighbours`]: the calibration's, or (without
+    /// them, or for other markers) found here for a pitch of `pitch_px`.
+    fn neighbours_or_new(&self, pitch_px: f64) -> std::borrow::Cow<'_, Neighbours> {
+        match self.neighbours.filter(|n| n.covers(self.at.len())) {
+            Some(n) => std::borrow::Cow::Borrowed(n),
+            None => std::borrow::Cow::Owned(Neighbours::new(self.at, pitch_px)),
+        }
+    }
+}
+
 /// Per rest marker, the other rest markers within [`NEIGHBOUR_PITCH`]
 /// pitches: whose displacements predict its place when the local search
 /// pairs it ([`follow_or_search`]). Computed once at calibration.
@@ -1162,14 +1173,7 @@ fn pair_detected(
             pair(j, k, &mut used, &mut displaced);
         }
     }
-    let own;
-    let neighbours = match rest.neighbours.filter(|n| n.covers(near.len())) {
-        Some(n) => n,
-        None => {
-            own = Neighbours::new(near, pitch_px);
-            &own
-        }
-    };
+    let neighbours = rest.neighbours_or_new(pitch_px);
     let mut look: Vec<usize> = (0..near.len())
         .filter(|&k| displaced[k].is_none())
         .collect();
@@ -1571,14 +1575,7 @@ fn search_around(
                 displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
             }
         }
-        let own;
-        let neighbours = match rest.neighbours.filter(|n| n.covers(near.len())) {
-            Some(n) => n,
-            None => {
-                own = Neighbours::new(near, pitch_px);
-                &own
-            }
-        };
+        let neighbours = rest.neighbours_or_new(pitch_px);
         let within_px = NEIGHBOUR_PITCH * pitch_px;
         // The searched markers the rest places left unpaired (few: those a
         // press moved furthest), indexed.
