@@ -618,8 +618,9 @@ pub enum Search {
     Full,
     /// Too many markers were lost for a local search (or its boxes covered
     /// too much of the frame): the whole frame was searched and its markers
-    /// paired with the rest markers, from the followed ones outwards through
-    /// their neighbours' displacements (`pair_detected`).
+    /// paired with the rest markers, from those still near their rest
+    /// places outwards through their neighbours' displacements
+    /// (`pair_detected`).
     Paired,
 }
 
@@ -1128,14 +1129,13 @@ pub fn follow_or_search(
 ///
 /// The seeds: each rest marker is paired with the nearest of the detected
 /// markers within [`PAIRED_SEED_PITCH`] of it whose nearest rest marker it
-/// is. Then, in
-/// rounds, each lost rest marker with at least two paired neighbours
-/// ([`Neighbours`]) is expected where their median displacement puts it
-/// ([`predicted`]), and is paired with the nearest unpaired detected marker
-/// within [`PAIRED_REACH_PITCH`] of that place, nearest pairs first; each
-/// round's pairs predict the next ([`PAIRED_MAX_ROUNDS`]). Detected markers
-/// left unpaired stay in the list (the density counts them) without a rest
-/// marker.
+/// is. Then, in rounds, each lost rest marker with at least two paired
+/// neighbours ([`Neighbours`]) is expected where their median displacement
+/// puts it ([`predicted`]), and is paired with the nearest unpaired detected
+/// marker within [`PAIRED_REACH_PITCH`] of that place, nearest pairs first;
+/// each round's pairs predict the next ([`PAIRED_MAX_ROUNDS`]). Detected
+/// markers left unpaired stay in the list (the density counts them) without
+/// a rest marker.
 fn pair_detected(
     frame: &GreyFrame,
     det: &Detector,
@@ -1232,11 +1232,11 @@ pub const PAIRED_SEED_PITCH: f64 = 0.25;
 /// session 22).
 pub const PAIRED_REACH_PITCH: f64 = 0.35;
 
-/// Rounds of [`Search::Paired`]'s pairing at most (a guard: the rounds end when one
-/// pairs none). Each round pairs about one ring of lost rest markers, next
-/// to the last round's pairs: on a generator frame sheared by 0.6 pitch
-/// over most of its width, 12 rounds left 318 of its 757 markers paired
-/// and 64 all of them
+/// Rounds of [`Search::Paired`]'s pairing at most (a guard: the rounds end
+/// when one pairs none). Each round pairs about one ring of lost rest
+/// markers, next to the last round's pairs: on a generator frame sheared by
+/// 0.6 pitch over most of its width, 12 rounds left 318 of its 757 markers
+/// paired and 64 all of them
 /// (`a_wide_shear_is_paired_through_the_neighbours_not_to_the_nearest_pin`).
 pub const PAIRED_MAX_ROUNDS: usize = 64;
 
