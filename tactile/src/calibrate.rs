@@ -793,17 +793,9 @@ fn search_window(
 /// Median distance from each marker to its nearest neighbour, px
 /// (O(n^2): calibration runs once).
 fn median_spacing(points: &[PointPx]) -> f64 {
-    let mut d: Vec<f64> = points
-        .iter()
-        .enumerate()
-        .map(|(n, p)| {
-            points
-                .iter()
-                .enumerate()
-                .filter(|&(m, _)| m != n)
-                .map(|(_, q)| (q.x - p.x).hypot(q.y - p.y))
-                .fold(f64::INFINITY, f64::min)
-        })
+    let mut d: Vec<f64> = area::nearest_distances(points, 1, false)
+        .into_iter()
+        .map(|d| d.first().copied().unwrap_or(f64::INFINITY))
         .collect();
     let k = d.len() / 2;
     *d.select_nth_unstable_by(k, f64::total_cmp).1

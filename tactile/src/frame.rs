@@ -147,27 +147,34 @@ pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f6
         .collect();
     let sum: f32 = kernel.iter().sum();
     kernel.iter_mut().for_each(|k| *k /= sum);
+    // Each output is the taps' products added in kernel order to 0, as a
+    // per-pixel loop would add them; the loops run over x innermost (for
+    // vectors), which leaves every sum the same.
+    let r = radius as usize;
+    let last = |i: i64, n: usize| i.clamp(0, n as i64 - 1) as usize;
     let mut tmp = vec![0f32; data.len()];
-    let (wi, hi) = (width as i64, height as i64);
-    for y in 0..height {
-        let row = &data[y * width..(y + 1) * width];
-        for x in 0..wi {
-            let mut acc = 0f32;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let xx = (x + k as i64 - radius).clamp(0, wi - 1) as usize;
-                acc += kv * row[xx];
+    // Rows: x in lo..hi reach no edge with any tap.
+    let (lo, hi) = (r.min(width), width.saturating_sub(r).max(r.min(width)));
+    for (row, out) in data.chunks_exact(width).zip(tmp.chunks_exact_mut(width)) {
+        for (k, &kv) in kernel.iter().enumerate().filter(|_| hi > lo) {
+            for (o, &v) in out[lo..hi].iter_mut().zip(&row[lo + k - r..]) {
+                *o += kv * v;
             }
-            tmp[y * width + x as usize] = acc;
+        }
+        for x in (0..lo).chain(hi..width) {
+            for (k, &kv) in kernel.iter().enumerate() {
+                out[x] += kv * row[last(x as i64 + k as i64 - radius, width)];
+            }
         }
     }
-    for y in 0..hi {
-        for x in 0..width {
-            let mut acc = 0f32;
-            for (k, &kv) in kernel.iter().enumerate() {
-                let yy = (y + k as i64 - radius).clamp(0, hi - 1) as usize;
-                acc += kv * tmp[yy * width + x];
+    // Columns: each tap is a whole (edge-clamped) row.
+    for (y, out) in data.chunks_exact_mut(width).enumerate() {
+        out.fill(0.0);
+        for (k, &kv) in kernel.iter().enumerate() {
+            let src = last(y as i64 + k as i64 - radius, height) * width;
+            for (o, &v) in out.iter_mut().zip(&tmp[src..src + width]) {
+                *o += kv * v;
             }
-            data[y as usize * width + x] = acc;
         }
     }
 }
@@ -539,6 +546,55 @@ fn bilinear(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::Strategy;
+
+    /// [`gaussian_blur`] as a plain per-pixel loop (the sums it must equal).
+    fn plain_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f64) {
+        let radius = (3.0 * sigma_px).ceil() as i64;
+        let mut kernel: Vec<f32> = (-radius..=radius)
+            .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
+            .collect();
+        let sum: f32 = kernel.iter().sum();
+        kernel.iter_mut().for_each(|k| *k /= sum);
+        let (wi, hi) = (width as i64, height as i64);
+        let mut tmp = vec![0f32; data.len()];
+        for y in 0..height {
+            for x in 0..wi {
+                let mut acc = 0f32;
+                for (k, &kv) in kernel.iter().enumerate() {
+                    acc += kv * data[y * width + (x + k as i64 - radius).clamp(0, wi - 1) as usize];
+                }
+                tmp[y * width + x as usize] = acc;
+            }
+        }
+        for y in 0..hi {
+            for x in 0..width {
+                let mut acc = 0f32;
+                for (k, &kv) in kernel.iter().enumerate() {
+                    acc += kv * tmp[(y + k as i64 - radius).clamp(0, hi - 1) as usize * width + x];
+                }
+                data[y as usize * width + x] = acc;
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// The blur's sums are the per-pixel loop's, bit for bit, for
+        /// frames narrower and wider than the kernel.
+        #[test]
+        fn the_blur_equals_the_per_pixel_loop(
+            (width, height, pixels) in (1usize..40, 1usize..30).prop_flat_map(|(w, h)| {
+                (proptest::prelude::Just(w), proptest::prelude::Just(h),
+                 proptest::collection::vec(0.0f32..255.0, w * h))
+            }),
+            sigma_px in 0.3f64..4.0,
+        ) {
+            let (mut fast, mut plain) = (pixels.clone(), pixels);
+            gaussian_blur(&mut fast, width, height, sigma_px);
+            plain_blur(&mut plain, width, height, sigma_px);
+            proptest::prop_assert_eq!(fast, plain);
+        }
+    }
 
     fn params(w: u32, h: u32) -> FrameParams {
         FrameParams {

@@ -306,17 +306,15 @@ pub fn estimate(rest: &[PointPx]) -> Surface {
     if rim_px <= 0.0 {
         return Surface::Flat;
     }
-    let neighbours = nearest_neighbours(&pts, NEIGHBOURS);
+    let radial = radial_neighbours(&pts, &nearest_neighbours(&pts, NEIGHBOURS), centre);
     let spread_for = |rim_deg: f64| -> f64 {
         let dome = Dome {
             centre,
             radius_px: rim_px / rim_deg.to_radians().sin(),
         };
-        spread(&pts, &neighbours, centre, |a, b| dome.arc_px(a, b))
+        spread(&pts, &radial, |a, b| dome.arc_px(a, b))
     };
-    let flat = spread(&pts, &neighbours, centre, |a, b| {
-        (a.x - b.x).hypot(a.y - b.y)
-    });
+    let flat = spread(&pts, &radial, |a, b| (a.x - b.x).hypot(a.y - b.y));
     let (mut best_deg, mut best) = (0.0, f64::INFINITY);
     for k in RIM_ANGLES_DEG {
         let deg = k as f64 * RIM_STEP_DEG;
@@ -372,31 +370,43 @@ fn nearest_neighbours(pts: &[PointPx], k: usize) -> Vec<Vec<usize>> {
         .collect()
 }
 
-/// Robust relative spread (interquartile range over median) of each point's
-/// distance, by `dist`, to its nearest image neighbour in the radial
-/// direction (within [`RADIAL_CONE_DEG`] of the line from `centre`). The
-/// radial spacing is what the dome foreshortens; the tangential one also
-/// depends on how the pins are laid out, and would bias the estimate.
-fn spread(
+/// Of each point's `neighbours`, those in the radial direction: within
+/// [`RADIAL_CONE_DEG`] of the line from `centre`. The radial spacing is
+/// what the dome foreshortens; the tangential one also depends on how the
+/// pins are laid out, and would bias the estimate.
+fn radial_neighbours(
     pts: &[PointPx],
     neighbours: &[Vec<usize>],
     centre: PointPx,
-    dist: impl Fn(PointPx, PointPx) -> f64,
-) -> f64 {
+) -> Vec<Vec<usize>> {
     let cone = RADIAL_CONE_DEG.to_radians().cos();
-    let mut d: Vec<f64> = pts
-        .iter()
+    pts.iter()
         .zip(neighbours)
-        .filter_map(|(p, ns)| {
+        .map(|(p, ns)| {
             let (rx, ry) = (p.x - centre.x, p.y - centre.y);
             let r = rx.hypot(ry);
             ns.iter()
-                .filter(|&&j| {
+                .copied()
+                .filter(|&j| {
                     let (qx, qy) = (pts[j].x - p.x, pts[j].y - p.y);
                     let q = qx.hypot(qy);
                     // Near the centre every direction is radial enough.
                     r < 1e-9 || q < 1e-9 || (rx * qx + ry * qy).abs() >= cone * r * q
                 })
+                .collect()
+        })
+        .collect()
+}
+
+/// Robust relative spread (interquartile range over median) of each point's
+/// distance, by `dist`, to its nearest `radial` neighbour
+/// ([`radial_neighbours`]; worked out once, not per dome tried).
+fn spread(pts: &[PointPx], radial: &[Vec<usize>], dist: impl Fn(PointPx, PointPx) -> f64) -> f64 {
+    let mut d: Vec<f64> = pts
+        .iter()
+        .zip(radial)
+        .filter_map(|(p, ns)| {
+            ns.iter()
                 .map(|&j| dist(*p, pts[j]))
                 .filter(|v| v.is_finite())
                 .min_by(f64::total_cmp)
