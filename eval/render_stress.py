@@ -28,6 +28,21 @@ Conditions (``render.py``'s ``NOMINAL`` with):
 - ``leds_off``: the housing LEDs off and a tenth of the light on the pins'
   side (``led_gain`` 0, ``gain`` 0.9, gradient 0.5).
 
+Then what the camera or its driver does to a frame after the renderer
+(the rest frame stays as rendered):
+
+- ``jpeg60``: each frame through JPEG at quality 60 (a webcam's MJPEG
+  stream);
+- ``motion6``: a linear motion blur of 6 px at 30 degrees (a fast slide
+  within one exposure);
+- ``gamma0.6``: a tone curve ``255 (v / 255)^0.6`` (auto exposure, or a
+  driver's gamma);
+- ``shift1.5``: the whole frame moved by (1.5, -1.0) px (the camera's mount
+  moved after calibration; no contact may come of it);
+- ``hot_pixels``: 0.1 % of the pixels stuck at 255 and 0.1 % at 0;
+- ``none``: ``NOMINAL`` as it is (the same contacts' draw, other seeds:
+  the row to compare the others with).
+
 Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR, in
 ``render.py``'s layout, ``<condition>/{rest.png,frames/,truth.csv}``, with
 dexitac's ``dexitac_default.csv``, kept). Writes
@@ -44,6 +59,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -60,7 +76,41 @@ CONDITIONS = {
     "noisy": dict(e_per_dn=2.0, read=6.0),
     "dark_corners": dict(vig=0.3),
     "leds_off": dict(led_gain=0.0, gain=0.9, grad=0.5),
+    "jpeg60": dict(jpeg=60),
+    "motion6": dict(motion_px=6.0, motion_deg=30.0),
+    "gamma0.6": dict(gamma=0.6),
+    "shift1.5": dict(shift_px=(1.5, -1.0)),
+    "hot_pixels": dict(hot=0.001),
+    "none": dict(),
 }
+
+
+def after_camera(img: np.ndarray, cond: dict, rng: np.random.Generator) -> np.ndarray:
+    """What the camera's driver does to a rendered 8-bit frame (the keys of
+    the conditions above that ``render.py`` does not know)."""
+    if "motion_px" in cond:
+        n = int(round(cond["motion_px"])) | 1
+        k = np.zeros((n, n), np.float32)
+        k[n // 2, :] = 1.0 / n
+        rot = cv2.getRotationMatrix2D(((n - 1) / 2, (n - 1) / 2), cond["motion_deg"], 1.0)
+        k = cv2.warpAffine(k, rot, (n, n))
+        img = np.clip(np.round(cv2.filter2D(img.astype(np.float32), -1, k / k.sum())), 0, 255).astype(np.uint8)
+    if "gamma" in cond:
+        img = np.clip(np.round(255.0 * (img / 255.0) ** cond["gamma"]), 0, 255).astype(np.uint8)
+    if "shift_px" in cond:
+        dx, dy = cond["shift_px"]
+        m = np.float32([[1, 0, dx], [0, 1, dy]])
+        img = cv2.warpAffine(img, m, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    if "hot" in cond:
+        u = rng.uniform(size=img.shape[:2])
+        img = img.copy()
+        img[u < cond["hot"]] = 255
+        img[u > 1 - cond["hot"]] = 0
+    if "jpeg" in cond:
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, int(cond["jpeg"])])
+        assert ok
+        img = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED)
+    return img
 
 
 def condition_contacts(name: str, sensor, seed: int, k: int):
@@ -103,6 +153,9 @@ def main() -> int:
             truth = []
             for i, rng, contact in condition_contacts(name, sensor, a.seed, a.frames_per_condition):
                 img, centre, n_vis = scene.render(contact, cond, rng)
+                img = after_camera(img, cond, rng)
+                if centre is not None and "shift_px" in cond:
+                    centre = (centre[0] + cond["shift_px"][0], centre[1] + cond["shift_px"][1])
                 R.write_png(d / "frames" / f"{i:04d}.png", img)
                 cx, cy = centre if centre is not None else (math.nan, math.nan)
                 truth.append({"frame": f"{i:04d}", "cx": cx, "cy": cy, "n_markers": n_vis})
