@@ -134,6 +134,18 @@ impl GreyFrame {
     }
 }
 
+/// The normalised Gaussian taps of [`gaussian_blur`], truncated at 3
+/// sigma: the radius in px and the `2 radius + 1` weights.
+fn gaussian_kernel(sigma_px: f64) -> (i64, Vec<f32>) {
+    let radius = (3.0 * sigma_px).ceil() as i64;
+    let mut kernel: Vec<f32> = (-radius..=radius)
+        .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
+        .collect();
+    let sum: f32 = kernel.iter().sum();
+    kernel.iter_mut().for_each(|k| *k /= sum);
+    (radius, kernel)
+}
+
 /// Separable Gaussian blur of a `width x height` row-major image in place
 /// (kernel truncated at 3 sigma, edges clamped); a `sigma_px` that is not
 /// positive (or NaN) does nothing.
@@ -141,12 +153,7 @@ pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f6
     if sigma_px.is_nan() || sigma_px <= 0.0 || width == 0 || height == 0 {
         return;
     }
-    let radius = (3.0 * sigma_px).ceil() as i64;
-    let mut kernel: Vec<f32> = (-radius..=radius)
-        .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
-        .collect();
-    let sum: f32 = kernel.iter().sum();
-    kernel.iter_mut().for_each(|k| *k /= sum);
+    let (radius, kernel) = gaussian_kernel(sigma_px);
     // Each output is the taps' products added in kernel order to 0, as a
     // per-pixel loop would add them; the loops run over x innermost (for
     // vectors), which leaves every sum the same.
@@ -550,12 +557,7 @@ mod tests {
 
     /// [`gaussian_blur`] as a plain per-pixel loop (the sums it must equal).
     fn plain_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f64) {
-        let radius = (3.0 * sigma_px).ceil() as i64;
-        let mut kernel: Vec<f32> = (-radius..=radius)
-            .map(|i| (-0.5 * (i as f64 / sigma_px).powi(2)).exp() as f32)
-            .collect();
-        let sum: f32 = kernel.iter().sum();
-        kernel.iter_mut().for_each(|k| *k /= sum);
+        let (radius, kernel) = gaussian_kernel(sigma_px);
         let (wi, hi) = (width as i64, height as i64);
         let mut tmp = vec![0f32; data.len()];
         for y in 0..height {
