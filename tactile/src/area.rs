@@ -443,8 +443,8 @@ pub fn lattice_members(points: &[PointPx]) -> Vec<usize> {
 /// the points in order of x, each stopped once the x gap alone exceeds the
 /// k-th distance so far: about O(n k) on a marker lattice, where sorting
 /// every pair's distance took half of a calibration (0.23 of 0.48 s for
-/// 1223 markers, BENCHMARKS.md, session 23). Points with a non-finite coordinate are measured against
-/// every other point instead.
+/// 1223 markers, BENCHMARKS.md, session 23). Points with a non-finite
+/// coordinate are measured against every other point instead.
 pub(crate) fn nearest_distances(points: &[PointPx], k: usize, skip_zero: bool) -> Vec<Vec<f64>> {
     // Offers `points[j]` to point `i`'s `best`; false once the x gap alone
     // exceeds the k-th distance (the sweep's stop).

@@ -791,7 +791,7 @@ fn search_window(
 }
 
 /// Median distance from each marker to its nearest neighbour, px
-/// (O(n^2): calibration runs once).
+/// ([`area::nearest_distances`]).
 fn median_spacing(points: &[PointPx]) -> f64 {
     let mut d: Vec<f64> = area::nearest_distances(points, 1, false)
         .into_iter()

@@ -1679,6 +1679,9 @@ fn fill_clipped_ridges(
 ) {
     let near = rest.at;
     let (w, h) = (frame.width(), frame.height());
+    if !lost.iter().any(|&l| l) {
+        return;
+    }
     let mut displaced: Vec<Option<PointPx>> = vec![None; near.len()];
     for m in markers.iter() {
         if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
@@ -1687,8 +1690,10 @@ fn fill_clipped_ridges(
     }
     let neighbours = rest.neighbours_or_new(pitch_px);
     let clear_px = RIDGE_CLEAR_PITCH * pitch_px;
+    // The markers so far, indexed once a place needs it (most frames have
+    // no clipped pixel where a lost marker is expected).
     let at: Vec<PointPx> = markers.iter().map(|m| m.pos).collect();
-    let index = PointIndex::new(&at, w, h, clear_px);
+    let mut index: Option<PointIndex> = None;
     let first = markers.len();
     for _ in 0..RIDGE_ROUNDS {
         let mut got = false;
@@ -1705,13 +1710,15 @@ fn fill_clipped_ridges(
                 && (x as usize) < w
                 && (y as usize) < h
                 && frame.data()[y as usize * w + x as usize] == u8::MAX;
-            let clear = || {
-                index.nearest(&at, q, clear_px).is_none()
-                    && markers[first..].iter().all(|m| {
-                        (m.pos.x - q.x).powi(2) + (m.pos.y - q.y).powi(2) >= clear_px * clear_px
-                    })
-            };
-            if !clipped || !det.may_hold(q) || !clear() {
+            if !clipped || !det.may_hold(q) {
+                continue;
+            }
+            let index = index.get_or_insert_with(|| PointIndex::new(&at, w, h, clear_px));
+            let clear = index.nearest(&at, q, clear_px).is_none()
+                && markers[first..].iter().all(|m| {
+                    (m.pos.x - q.x).powi(2) + (m.pos.y - q.y).powi(2) >= clear_px * clear_px
+                });
+            if !clear {
                 continue;
             }
             markers.push(Marker {
