@@ -1058,7 +1058,11 @@ impl BlurLevels {
 ///
 /// A followed marker keeps its followed centroid; a searched one is added
 /// where no followed marker lies within `reach_px` (it is the new place of
-/// a lost one). Session 6 searched the box around the lost markers *instead
+/// a lost one). A lost marker the local search still misses is put where
+/// its paired neighbours' displacements predict it when that pixel is
+/// clipped and no marker lies within [`RIDGE_CLEAR_PITCH`] (pins a press
+/// squeezed into one clipped ridge, which a blur leaves no neck to split
+/// at). Session 6 searched the box around the lost markers *instead
 /// of* following inside it (commit 45ed751) and measured it slower and less
 /// accurate: following was slower then, and centroids of the two paths
 /// mixed at the box's edge (BENCHMARKS.md, section "Domes": "Tried and not
@@ -1740,10 +1744,13 @@ fn fill_clipped_ridges(
     }
 }
 
-/// [`fill_clipped_ridges`] takes a lost rest marker to be at its predicted
-/// place only when no marker lies within this many pitches of it.
+/// The local search takes a lost rest marker to be at its predicted place
+/// on a clipped ridge (pins a press squeezed into one; see
+/// [`follow_or_search`]) only when no marker lies within this many pitches
+/// of it.
 pub const RIDGE_CLEAR_PITCH: f64 = 0.4;
-/// Rounds of [`fill_clipped_ridges`] at most.
+/// Rounds of the clipped-ridge rule ([`RIDGE_CLEAR_PITCH`]) at most: each
+/// round's pins predict the next.
 pub const RIDGE_ROUNDS: usize = 3;
 
 /// Rest markers this many pitches apart are neighbours: the displacements
