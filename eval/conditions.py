@@ -2,7 +2,7 @@
 """dexitac on real taps under light and focus the frames never had.
 
     python eval/conditions.py --dexitac target/release/dexitac [--sets A B ...]
-        [--data data/real] [--out eval/results] [--date TAG]
+        [--conditions A B ...] [--data data/real] [--out eval/results] [--date TAG]
 
 The TacTip shear sets (eval/layout.py) are re-rendered under each condition
 below, the frames only: the rest stays the undegraded ``level`` rest that
@@ -21,7 +21,16 @@ Conditions (seeded noise; grey levels of the 0/255 processed frames):
 - ``blur2.5``: Gaussian blur, sigma 2.5 px;
 - ``blur1.8_noise6``: blur 1.8 px and Gaussian noise of 6 grey levels;
 - ``harsh``: blur 1 px, a third of the light, the vignetting and gradient
-  above, an offset of 20 and noise of 4.
+  above, an offset of 20 and noise of 4;
+
+and what a camera's driver does to a frame (``render_stress.after_camera``):
+
+- ``jpeg60``: JPEG at quality 60;
+- ``motion6``: a linear motion blur of 6 px at 30 degrees;
+- ``gamma0.6``: the tone curve ``255 (v / 255)^0.6``;
+- ``shift2``: the whole frame moved by (2, -1) px (whole pixels: no
+  resampling);
+- ``hot_pixels``: 0.1 % of the pixels stuck at 255 and 0.1 % at 0.
 
 The degraded frames and dexitac's CSVs go to a temporary folder and are
 deleted. Writes <out>/<date>-conditions.md.
@@ -42,6 +51,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import run as R  # noqa: E402
+from render_stress import after_camera  # noqa: E402
 
 SETS = ["tactip_shear_cr", "tactip_shear_franka"]
 
@@ -62,6 +72,16 @@ def light(im: np.ndarray) -> np.ndarray:
     return vignette(im.shape, 0.55) * gradient(im.shape, 0.3)
 
 
+def driver(cond: dict):
+    """A condition of ``render_stress.after_camera`` on a float frame."""
+
+    def apply(im: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        u8 = np.clip(np.round(im), 0, 255).astype(np.uint8)
+        return after_camera(u8, cond, rng).astype(np.float64)
+
+    return apply
+
+
 CONDITIONS = {
     "none": lambda im, rng: im,
     "dim3": lambda im, rng: im / 3.0,
@@ -70,6 +90,11 @@ CONDITIONS = {
     "blur1.8_noise6": lambda im, rng: cv2.GaussianBlur(im, (0, 0), 1.8) + rng.normal(0, 6, im.shape),
     "harsh": lambda im, rng: cv2.GaussianBlur(im, (0, 0), 1.0) / 3.0 * light(im) + 20
     + rng.normal(0, 4, im.shape),
+    "jpeg60": driver(dict(jpeg=60)),
+    "motion6": driver(dict(motion_px=6.0, motion_deg=30.0)),
+    "gamma0.6": driver(dict(gamma=0.6)),
+    "shift2": driver(dict(shift_px=(2.0, -1.0))),
+    "hot_pixels": driver(dict(hot=0.001)),
 }
 
 
@@ -77,6 +102,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", required=True)
     ap.add_argument("--sets", nargs="*", default=SETS)
+    ap.add_argument("--conditions", nargs="*", default=list(CONDITIONS), choices=list(CONDITIONS))
     ap.add_argument("--data", default="data/real")
     ap.add_argument("--out", default="eval/results")
     ap.add_argument("--date", default=dt.date.today().isoformat())
@@ -100,7 +126,8 @@ def main() -> int:
             return 1
         meta = json.loads((d / "set.json").read_text())
         labels = R.read_csv(d / "labels.csv")
-        for cond, f in CONDITIONS.items():
+        for cond in a.conditions:
+            f = CONDITIONS[cond]
             rng = np.random.default_rng(0)
             with tempfile.TemporaryDirectory() as tmp:
                 frames = Path(tmp) / "frames"

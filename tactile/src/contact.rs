@@ -566,13 +566,18 @@ pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usiz
 }
 
 /// The cells of `grid` whose samples lie within `reach_px` of the rest
-/// place of a strongly moved marker ([`strongly_moved`]; each place taken
-/// at its nearest sample): the support a density region needs to be a
-/// press ([`segment_supported`]). The markers a press moves away from its
-/// dent rested in or beside it; a dent that no such marker borders is
-/// markers lost or found apart from any press (a rim pin the frame's mask
-/// cut off as the skin sheared: franka's real taps, BENCHMARKS.md, session
-/// 22).
+/// place of a marker that moved strongly against the rest of the skin:
+/// beyond [`strong_move_px`] from the field's common displacement (per
+/// axis, the median), each place taken at its nearest sample. That is the
+/// support a density region needs to be a press ([`segment_supported`]).
+/// The markers a press moves away from its dent rested in or beside it; a
+/// dent that no such marker borders is markers lost or found apart from
+/// any press (a rim pin the frame's mask cut off as the skin sheared:
+/// franka's real taps, BENCHMARKS.md, session 22). Against the common
+/// displacement, not the rest place: with the camera moved 2 px after
+/// calibration every marker moved beyond the strong move's cap, and holes
+/// the mask cut at the rim passed for presses (the real taps' R² fell from
+/// 0.97 / 0.96 to 0.54 / 0.72 on cr, BENCHMARKS.md, session 23).
 pub fn support_cells(
     grid: &crate::density::Grid,
     rest: &[PointPx],
@@ -590,7 +595,14 @@ pub fn support_cells(
         .filter(|&(di, dj)| ((di * di + dj * dj) as f64) <= reach_cells * reach_cells)
         .collect();
     let cell = |v: f64| ((v - (step - 1.0) / 2.0) / step).round();
-    for n in strongly_moved(field, pitch_px) {
+    let common = common_displacement(field);
+    let strong2 = strong_move_px(field, pitch_px).powi(2);
+    let moved = field.displacement.iter().enumerate().filter_map(|(n, u)| {
+        let u = (*u)?;
+        let d2 = (u.x - common.x).powi(2) + (u.y - common.y).powi(2);
+        (d2 > strong2 || d2.is_nan()).then_some(n)
+    });
+    for n in moved {
         let Some(&p) = rest.get(n).filter(|p| p.is_finite()) else {
             continue;
         };
@@ -603,6 +615,29 @@ pub fn support_cells(
         }
     }
     support
+}
+
+/// Per axis, the median of the tracked markers' displacements ((0, 0)
+/// with none): what the whole skin (or the camera) moved.
+fn common_displacement(field: &Field) -> PointPx {
+    let median = |mut v: Vec<f64>| {
+        if v.is_empty() {
+            return 0.0;
+        }
+        let k = v.len() / 2;
+        *v.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let tracked = || {
+        field
+            .displacement
+            .iter()
+            .flatten()
+            .filter(|u| u.is_finite())
+    };
+    PointPx::new(
+        median(tracked().map(|u| u.x).collect()),
+        median(tracked().map(|u| u.y).collect()),
+    )
 }
 
 /// True when the field may hold a contact: some marker moved strongly
@@ -1066,6 +1101,26 @@ mod tests {
         assert!(dist(largest.centre, hole) < pitch, "{largest:?}");
         let support = support_cells(&map.grid, &rest, &field, pitch, 15.0);
         let r = segment_supported(&map, &reference, &loose(), 0.1, &support).unwrap();
+        assert!(dist(r.centre, press) < 0.5 * pitch, "{r:?}");
+        // The camera moved by 0.2 pitch (beyond the strong move's cap):
+        // every marker moved, but only the press moved against the rest
+        // of the skin.
+        let shift = PointPx::new(0.2 * pitch, 0.0);
+        let moved_camera = Field {
+            displacement: field
+                .displacement
+                .iter()
+                .map(|u| u.map(|u| PointPx::new(u.x + shift.x, u.y + shift.y)))
+                .collect(),
+            ..field.clone()
+        };
+        let now_moved: Vec<PointPx> = now
+            .iter()
+            .map(|p| PointPx::new(p.x + shift.x, p.y + shift.y))
+            .collect();
+        let map_moved = density::estimate(&now_moved, &setup, None);
+        let support = support_cells(&map_moved.grid, &rest, &moved_camera, pitch, 15.0);
+        let r = segment_supported(&map_moved, &reference, &loose(), 0.1, &support).unwrap();
         assert!(dist(r.centre, press) < 0.5 * pitch, "{r:?}");
         // Without the press, the hole alone is no region.
         let still = Field {
