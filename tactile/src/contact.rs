@@ -551,6 +551,15 @@ pub fn strong_move_px(field: &Field, pitch_px: f64) -> f64 {
 /// estimate and with it the moved threshold, while the strong threshold is
 /// capped.
 pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usize> + '_ {
+    strongly_moved_against(field, pitch_px, PointPx::new(0.0, 0.0))
+}
+
+/// [`strongly_moved`], with each displacement taken against `common`.
+fn strongly_moved_against(
+    field: &Field,
+    pitch_px: f64,
+    common: PointPx,
+) -> impl Iterator<Item = usize> + '_ {
     let strong2 = strong_move_px(field, pitch_px).powi(2);
     field
         .displacement
@@ -558,7 +567,7 @@ pub fn strongly_moved(field: &Field, pitch_px: f64) -> impl Iterator<Item = usiz
         .enumerate()
         .filter_map(move |(n, u)| {
             let u = (*u)?;
-            let d2 = u.x * u.x + u.y * u.y;
+            let d2 = (u.x - common.x).powi(2) + (u.y - common.y).powi(2);
             // A NaN displacement is looked at, not silently dropped (the
             // later stages reject it).
             (d2 > strong2 || d2.is_nan()).then_some(n)
@@ -595,14 +604,7 @@ pub fn support_cells(
         .filter(|&(di, dj)| ((di * di + dj * dj) as f64) <= reach_cells * reach_cells)
         .collect();
     let cell = |v: f64| ((v - (step - 1.0) / 2.0) / step).round();
-    let common = common_displacement(field);
-    let strong2 = strong_move_px(field, pitch_px).powi(2);
-    let moved = field.displacement.iter().enumerate().filter_map(|(n, u)| {
-        let u = (*u)?;
-        let d2 = (u.x - common.x).powi(2) + (u.y - common.y).powi(2);
-        (d2 > strong2 || d2.is_nan()).then_some(n)
-    });
-    for n in moved {
+    for n in strongly_moved_against(field, pitch_px, common_displacement(field)) {
         let Some(&p) = rest.get(n).filter(|p| p.is_finite()) else {
             continue;
         };
