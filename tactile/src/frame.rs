@@ -159,6 +159,8 @@ pub fn gaussian_blur(data: &mut [f32], width: usize, height: usize, sigma_px: f6
     // vectors), which leaves every sum the same.
     let r = radius as usize;
     let last = |i: i64, n: usize| i.clamp(0, n as i64 - 1) as usize;
+    // The image's pixels (a longer buffer's tail is left alone).
+    let data = &mut data[..width * height];
     let mut tmp = vec![0f32; data.len()];
     // Rows: x in lo..hi reach no edge with any tap.
     let (lo, hi) = (r.min(width), width.saturating_sub(r).max(r.min(width)));
