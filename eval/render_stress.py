@@ -40,8 +40,8 @@ Then what the camera or its driver does to a frame after the renderer
 - ``shift1.5``: the whole frame moved by (1.5, -1.0) px (the camera's mount
   moved after calibration; no contact may come of it);
 - ``hot_pixels``: 0.1 % of the pixels stuck at 255 and 0.1 % at 0;
-- ``none``: ``NOMINAL`` as it is (the same contacts' draw, other seeds:
-  the row to compare the others with).
+- ``none``: ``NOMINAL`` as it is (contacts drawn as in every condition,
+  from its own seeds: the row to compare the others with).
 
 Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR, in
 ``render.py``'s layout, ``<condition>/{rest.png,frames/,truth.csv}``, with
