@@ -622,13 +622,6 @@ pub fn support_cells(
 /// Per axis, the median of the tracked markers' displacements ((0, 0)
 /// with none): what the whole skin (or the camera) moved.
 fn common_displacement(field: &Field) -> PointPx {
-    let median = |mut v: Vec<f64>| {
-        if v.is_empty() {
-            return 0.0;
-        }
-        let k = v.len() / 2;
-        *v.select_nth_unstable_by(k, f64::total_cmp).1
-    };
     let tracked = || {
         field
             .displacement
@@ -636,9 +629,10 @@ fn common_displacement(field: &Field) -> PointPx {
             .flatten()
             .filter(|u| u.is_finite())
     };
+    let axis = |mut v: Vec<f64>| median(&mut v).unwrap_or(0.0);
     PointPx::new(
-        median(tracked().map(|u| u.x).collect()),
-        median(tracked().map(|u| u.y).collect()),
+        axis(tracked().map(|u| u.x).collect()),
+        axis(tracked().map(|u| u.y).collect()),
     )
 }
 

@@ -1575,12 +1575,7 @@ fn search_around(
         }
     }
     if lost.iter().any(|&l| l) && searched.iter().any(|m| m.followed_from.is_none()) {
-        let mut displaced: Vec<Option<PointPx>> = vec![None; near.len()];
-        for m in list.iter().chain(&searched) {
-            if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
-                displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
-            }
-        }
+        let mut displaced = displacements(near, list.iter().chain(&searched));
         let neighbours = rest.neighbours_or_new(pitch_px);
         let within_px = NEIGHBOUR_PITCH * pitch_px;
         // The searched markers the rest places left unpaired (few: those a
@@ -1656,6 +1651,21 @@ fn search_around(
     Some(list)
 }
 
+/// Per rest marker of `near`, the displacement of the marker of `markers`
+/// paired with it ([`Marker::followed_from`]; the last one), or `None`.
+fn displacements<'a>(
+    near: &[PointPx],
+    markers: impl Iterator<Item = &'a Marker>,
+) -> Vec<Option<PointPx>> {
+    let mut displaced = vec![None; near.len()];
+    for m in markers {
+        if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
+            displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
+        }
+    }
+    displaced
+}
+
 /// Pins a press squeezed into one clipped ridge that no split told apart
 /// (under blur the ridge has no neck between them, and `split_chain` needs
 /// one): a lost rest marker whose paired neighbours' displacements
@@ -1686,12 +1696,7 @@ fn fill_clipped_ridges(
     if !lost.iter().any(|&l| l) {
         return;
     }
-    let mut displaced: Vec<Option<PointPx>> = vec![None; near.len()];
-    for m in markers.iter() {
-        if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
-            displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
-        }
-    }
+    let mut displaced = displacements(near, markers.iter());
     let neighbours = rest.neighbours_or_new(pitch_px);
     let clear_px = RIDGE_CLEAR_PITCH * pitch_px;
     // The markers so far, indexed once a place needs it (most frames have
