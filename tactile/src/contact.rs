@@ -288,8 +288,14 @@ pub fn segment_supported(
     // cells lay at 0.82-0.90 of rest, BENCHMARKS.md, session 24).
     let min_hole_cells =
         (0.25 * std::f64::consts::PI * params_reach_cells(map).powi(2)).ceil() as usize;
+    // (The paper's absolute rule keeps its regions as they are.)
+    let relative = params.threshold == ThresholdMode::Relative;
     let enclosure = |flood: &[(usize, usize)]| {
-        let holes = ring_holes(flood, &usable, min_hole_cells);
+        let holes = if relative {
+            ring_holes(flood, &usable, min_hole_cells)
+        } else {
+            Vec::new()
+        };
         let ring = !holes.is_empty() && holes.len() as f64 >= RING_SHARE * flood.len() as f64;
         (holes, ring)
     };
