@@ -118,6 +118,7 @@ fn run_plays_directories_of_frames_against_the_board_then_stops_safely() {
                     width_px: 25.0,
                     strength: 0.6,
                     shear_px: PointPx::new(0.0, 0.0),
+                    flat_radius_px: 0.0,
                 }]
             };
             let f = synth::render(&Scene {

@@ -120,6 +120,7 @@ impl Renderer {
                 contact.shear_mm[0] / self.mm_per_px,
                 contact.shear_mm[1] / self.mm_per_px,
             ),
+            flat_radius_px: 0.0,
         }
     }
 

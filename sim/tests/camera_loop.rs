@@ -78,6 +78,7 @@ fn fake_sensors(
                                 width_px: 25.0,
                                 strength: 0.6,
                                 shear_px: PointPx::new(0.0, 0.0),
+                                flat_radius_px: 0.0,
                             }],
                             dropout: 0.0,
                             seed: 10 * finger + seed,

@@ -786,7 +786,11 @@ impl SensorSpec {
             let g = dome.radius_px * dot(m0, c).clamp(-1.0, 1.0).acos();
             let w2 = press.width_px * press.width_px;
             // Radial: away from the press centre along the great circle.
-            let arc = f * press.strength * g * (-g * g / (2.0 * w2)).exp();
+            let arc = if press.flat_radius_px > 0.0 {
+                f * press.radial_px(g)
+            } else {
+                f * press.strength * g * (-g * g / (2.0 * w2)).exp()
+            };
             if let Some(axis) = normalized(cross(c, m0)) {
                 m = rotate(m, axis, arc / dome.radius_px);
             }
@@ -891,6 +895,12 @@ pub struct Press {
     pub strength: f64,
     /// Shear displacement at the centre, px.
     pub shear_px: PointPx,
+    /// Radius of a flat punch's face, px (0: a rounded indenter). The skin
+    /// under the face moves as one (along the view: not at all in the
+    /// image); the radial push starts at its edge, so the pins there part
+    /// from the ones under it and the density dips in a ring around skin at
+    /// rest (the other renderer's Boussinesq punches).
+    pub flat_radius_px: f64,
 }
 
 impl Press {
@@ -901,12 +911,34 @@ impl Press {
         let dy = p.y - self.centre.y;
         let r2 = dx * dx + dy * dy;
         let w2 = self.width_px * self.width_px;
-        let radial = self.strength * (-r2 / (2.0 * w2)).exp();
+        let radial = if self.flat_radius_px > 0.0 {
+            let r = r2.sqrt();
+            self.radial_px(r) / r.max(f64::MIN_POSITIVE)
+        } else {
+            self.strength * (-r2 / (2.0 * w2)).exp()
+        };
         let shear = (-r2 / (2.0 * 2.25 * w2)).exp();
         PointPx::new(
             radial * dx + shear * self.shear_px.x,
             radial * dy + shear * self.shear_px.y,
         )
+    }
+
+    /// How far this press pushes a skin point `r` px from its centre
+    /// outwards, px: `k r exp(-r^2 / 2 w^2)`; for a flat punch 0 under the
+    /// face and `k w exp(-d^2 / 2 w^2)` at `d = r - a` beyond its edge (the
+    /// elastic slope is unbounded at a punch's edge: the pins there tilt
+    /// most, and part from the ones under the face).
+    pub fn radial_px(&self, r: f64) -> f64 {
+        let w2 = self.width_px * self.width_px;
+        if self.flat_radius_px <= 0.0 {
+            return self.strength * r * (-r * r / (2.0 * w2)).exp();
+        }
+        let d = r - self.flat_radius_px;
+        if d <= 0.0 {
+            return 0.0;
+        }
+        self.strength * self.width_px * (-d * d / (2.0 * w2)).exp()
     }
 
     /// Where the indenter's centre appears in the image (the truth; flat free
@@ -1378,6 +1410,7 @@ impl Category {
             width_px,
             strength,
             shear_px: PointPx::new(0.0, 0.0),
+            flat_radius_px: 0.0,
         };
         let mut dropout = 0.0;
         let presses = match self {
@@ -1450,6 +1483,7 @@ impl Category {
                     width_px: rng.range(15.0, 25.0) * s,
                     strength: rng.range(0.5, 0.9),
                     shear_px: PointPx::new(0.0, 0.0),
+                    flat_radius_px: 0.0,
                 }]
             }
             Category::Dome | Category::TacTip => vec![Press {
@@ -1457,12 +1491,14 @@ impl Category {
                 width_px: rng.range(15.0, 30.0) * s,
                 strength: rng.range(0.5, 0.9),
                 shear_px: PointPx::new(0.0, 0.0),
+                flat_radius_px: 0.0,
             }],
             _ => vec![Press {
                 centre: at(inner * rng.range(0.0, 0.25).sqrt()),
                 width_px: rng.range(15.0, 30.0) * s,
                 strength: rng.range(0.5, 0.9),
                 shear_px: PointPx::new(0.0, 0.0),
+                flat_radius_px: 0.0,
             }],
         };
         let mut sensor = sensor.clone();
@@ -1548,12 +1584,41 @@ mod tests {
     }
 
     #[test]
+    fn a_flat_punch_leaves_its_face_and_pushes_its_edge_out() {
+        let punch = Press {
+            centre: PointPx::new(100.0, 100.0),
+            width_px: 9.0,
+            strength: 1.2,
+            shear_px: PointPx::new(0.0, 0.0),
+            flat_radius_px: 50.0,
+        };
+        let at = |x: f64| punch.displacement(PointPx::new(x, 100.0));
+        for x in [100.0, 120.0, 149.9] {
+            assert_eq!(at(x), PointPx::new(0.0, 0.0), "under the face at {x}");
+        }
+        // Just beyond the edge: k w outwards; a width further, exp(-1/2) of it.
+        assert!((at(150.001).x - 1.2 * 9.0).abs() < 1e-3 && at(150.001).y == 0.0);
+        assert!((at(159.0).x - 1.2 * 9.0 * (-0.5f64).exp()).abs() < 1e-9);
+        assert!(at(41.0).x < 0.0);
+        // On a dome too: the face's skin stays where it was.
+        let sensor = SensorSpec::domed(640, 480);
+        let c = sensor.centre;
+        let press = Press { centre: c, ..punch };
+        let under = PointPx::new(c.x + 20.0, c.y);
+        let u = sensor.displacement_at(under, &[press]);
+        assert!(u.x.hypot(u.y) < 1e-9, "{u:?}");
+        let beyond = PointPx::new(c.x + 60.0, c.y);
+        assert!(sensor.displacement_at(beyond, &[press]).x > 1.0);
+    }
+
+    #[test]
     fn press_pushes_markers_outward_and_truth_includes_shear() {
         let p = Press {
             centre: PointPx::new(100.0, 100.0),
             width_px: 20.0,
             strength: 0.8,
             shear_px: PointPx::new(2.0, -1.0),
+            flat_radius_px: 0.0,
         };
         let u = p.displacement(PointPx::new(120.0, 100.0));
         assert!(u.x > 9.0 && u.x < 12.0, "{u:?}");

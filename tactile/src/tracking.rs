@@ -563,6 +563,7 @@ mod tests {
             width_px: 6.0,
             strength: 0.8,
             shear_px: PointPx::new(0.0, 0.0),
+            flat_radius_px: 0.0,
         };
         let cur: Vec<PointPx> = rest
             .iter()

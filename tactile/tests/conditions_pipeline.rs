@@ -187,3 +187,44 @@ fn rest_from_frames_recovers_the_rest_markers() {
     );
     assert!(cal.rest_markers.iter().all(|p| near(p, 1.5)));
 }
+
+#[test]
+fn a_wide_flat_punch_is_found_and_centred_on_its_face() {
+    // A flat punch 3.5 pitches in radius: the skin under its face stays
+    // put and the pins at its edge are pushed out by 0.7 pitch, so the
+    // density dips in a ring around skin at rest (the other renderer's
+    // punches, BENCHMARKS.md, session 24). The region is the ring's disc;
+    // taken as a dent it was an arc of the ring, 48-54 px off.
+    let cat = Category::Nominal;
+    let sensor = cat.sensor(640, 480, 5);
+    let rest = synth::rest_frame(&sensor, 1);
+    let params = Params::default();
+    let cal = calibrate::calibrate(std::slice::from_ref(&rest.image), &params).unwrap();
+    let pitch = cal.pitch_px;
+    let pipe = dexitac_tactile::pipeline::Pipeline::new(cal, params);
+    for (k, (x, y)) in [
+        (300.0, 220.0),
+        (350.0, 270.0),
+        (270.0, 250.0),
+        (330.0, 200.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut scene = cat.scene(&sensor, 300 + k as u64);
+        scene.dropout = 0.0;
+        scene.presses = vec![synth::Press {
+            centre: PointPx::new(x, y),
+            width_px: 0.6 * pitch,
+            strength: 1.2,
+            shear_px: PointPx::new(0.0, 0.0),
+            flat_radius_px: 3.5 * pitch,
+        }];
+        let frame = synth::render(&scene);
+        let r = pipe.run(&frame.image).unwrap();
+        let truth = frame.contacts[0];
+        let c = r.contact.expect("the punch is found");
+        let err = (c.centre.x - truth.x).hypot(c.centre.y - truth.y);
+        assert!(err <= 4.0, "punch {k}: {err:.2} px off");
+    }
+}

@@ -404,6 +404,7 @@ fn dome_contact_pushes_markers_away_along_the_dome() {
         width_px: 20.0,
         strength: 0.8,
         shear_px: PointPx::new(0.0, 0.0),
+        flat_radius_px: 0.0,
     };
     let presses = [press];
     // The truth is the press centre (no shear), up to the lift/project round
@@ -434,6 +435,7 @@ fn dome_contact_pushes_markers_away_along_the_dome() {
     // A sheared contact's truth moves along the dome by the shear's arc.
     let sheared = Press {
         shear_px: PointPx::new(3.0, 0.0),
+        flat_radius_px: 0.0,
         ..press
     };
     let t = sensor.visible_centre(&sheared);
@@ -631,6 +633,7 @@ fn texture_moves_with_the_skin() {
         width_px: 30.0,
         strength: 0.9,
         shear_px: PointPx::new(0.0, 0.0),
+        flat_radius_px: 0.0,
     };
     let scene = synth::Scene {
         sensor: sensor.clone(),
