@@ -52,7 +52,8 @@ use crate::PointPx;
 pub struct Region {
     /// The region's centre, working px: the sub-pixel argmin of the score
     /// over it, or for a region wider than [`CENTROID_RADIUS_H`] kernel
-    /// widths its depth-weighted centroid on the skin.
+    /// widths, or one that encloses skin, its depth-weighted centroid on
+    /// the skin; for a ring ([`RING_SHARE`]) the centroid of its disc.
     pub centre: PointPx,
     /// Grid cells in the region, the ones it encloses included.
     pub cells: usize,
@@ -162,7 +163,9 @@ struct Flood {
 }
 
 /// Stage 4 entry: the largest low-density region of `map` (inside its ROI and
-/// the mask), or `None` when there is none of at least `min_area_mm2`.
+/// the mask), or `None` when there is none of at least `min_area_mm2`;
+/// without one, under the relative rule, a band below the extent that
+/// encloses skin (a flat press's ring, [`RING_SHARE`]).
 /// The reference's rest density and mask are on the same grid as `map`.
 pub fn segment(
     map: &DensityMap,
@@ -319,6 +322,7 @@ pub fn segment_supported(
                 }
                 let (_, supported, low) = flood(i, j, &mut flood_cells, &mut seen);
                 let (inside, is_ring) = enclosure(&flood_cells);
+                // Its cells: the band and what it encloses.
                 let disc = flood_cells.len() + inside.len();
                 if supported && !inside.is_empty() && best.as_ref().is_none_or(|b| disc > b.cells) {
                     best = Some(Flood {
@@ -615,7 +619,9 @@ pub const MIN_INLIER_SHARE: f64 = 0.6;
 /// meet within 1.5 pitches of it) is tried first, then a shallow wide one
 /// (a ring of moved markers that meet from all sides,
 /// [`SHALLOW_REACH_PITCHES`], [`SHALLOW_MAX_SPREAD_RAD`],
-/// [`SHALLOW_MAX_RESULTANT`]).
+/// [`SHALLOW_MAX_RESULTANT`]). A region that encloses skin keeps its own
+/// centre: the lines of a flat press's edge meet where its parallax bends
+/// them.
 pub fn locate(
     region: Option<Region>,
     rest: &[PointPx],
@@ -1010,6 +1016,11 @@ mod tests {
         }
     }
 
+    /// [`segment`] of `map` against `rest` on a flat skin, `loose()`.
+    fn segment_flat(map: &DensityMap, rest: &DensityMap, mask: &[bool]) -> Option<Region> {
+        segment(map, &DensityReference::flat(rest, mask), &loose(), 1.0)
+    }
+
     #[test]
     fn largest_region_wins_and_centre_is_its_minimum() {
         let mut v = vec![1.0f32; 100];
@@ -1057,7 +1068,7 @@ mod tests {
     #[test]
     fn a_flat_press_ring_is_centred_on_the_disc_it_encloses() {
         let (map, rest, mask) = ring_map(0);
-        let r = segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).unwrap();
+        let r = segment_flat(&map, &rest, &mask).unwrap();
         // Its lowest cells, on the deep arc, are 13 cells off the middle.
         assert!(
             (r.centre.x - 30.0).abs() < 0.5 && (r.centre.y - 32.0).abs() < 0.5,
@@ -1073,7 +1084,7 @@ mod tests {
         // alone is the region, with the same centre.
         let v: Vec<f32> = map.values_per_mm2.iter().map(|&x| x.max(0.85)).collect();
         let (map, rest) = maps(v, 64, 64);
-        let r = segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).unwrap();
+        let r = segment_flat(&map, &rest, &mask).unwrap();
         assert!((r.centre.x - 30.0).abs() < 0.5 && (r.centre.y - 32.0).abs() < 0.5);
     }
 
@@ -1096,13 +1107,7 @@ mod tests {
             }
         }
         let (map, rest) = maps(v, 80, 80);
-        let r = segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 6400]),
-            &loose(),
-            1.0,
-        )
-        .unwrap();
+        let r = segment_flat(&map, &rest, &[true; 6400]).unwrap();
         assert!(r.enclosed_cells > 150, "{}", r.enclosed_cells);
         assert!(
             r.centre.x > 41.5 && (r.centre.y - 40.0).abs() < 0.5,
@@ -1121,13 +1126,7 @@ mod tests {
             })
             .collect();
         let (map, rest) = maps(v, 80, 80);
-        let r = segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 6400]),
-            &loose(),
-            1.0,
-        )
-        .expect("a closed band is a region");
+        let r = segment_flat(&map, &rest, &[true; 6400]).expect("a closed band is a region");
         assert!(r.enclosed_cells > 150 && r.centre.x > 41.5, "{r:?}");
     }
 
@@ -1135,12 +1134,12 @@ mod tests {
     fn a_ring_the_mask_cuts_open_encloses_nothing() {
         // The mask ends inside the ring: what it held is open to the rim.
         let (map, rest, mask) = ring_map(24);
-        let r = segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0);
+        let r = segment_flat(&map, &rest, &mask);
         assert!(r.is_none_or(|r| r.enclosed_cells == 0), "{r:?}");
         // Without the deep arc there is no region at all.
         let v: Vec<f32> = map.values_per_mm2.iter().map(|&x| x.max(0.85)).collect();
         let (map, rest) = maps(v, 64, 64);
-        assert!(segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).is_none());
+        assert!(segment_flat(&map, &rest, &mask).is_none());
     }
 
     #[test]
@@ -1250,7 +1249,7 @@ mod tests {
         assert!(segment(&map, &DensityReference::flat(&rest, &[true; 100]), &p, 1.0).is_none());
         let mut mask = [true; 100];
         mask[44] = false;
-        assert!(segment(&map, &DensityReference::flat(&rest, &mask), &loose(), 1.0).is_none());
+        assert!(segment_flat(&map, &rest, &mask).is_none());
     }
 
     /// A hex lattice of pitch 30 px on a 300 x 300 frame, its density setup
