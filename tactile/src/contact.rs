@@ -1140,6 +1140,16 @@ mod tests {
         let v: Vec<f32> = map.values_per_mm2.iter().map(|&x| x.max(0.85)).collect();
         let (map, rest) = maps(v, 64, 64);
         assert!(segment_flat(&map, &rest, &mask).is_none());
+        // A hole in the mask inside the ring (a config's mask, or a patch
+        // of the rest without pins): what the ring holds is joined to cells
+        // that are no skin, so it encloses nothing either.
+        let (map, rest, mut mask) = ring_map(0);
+        for (k, m) in mask.iter_mut().enumerate() {
+            let (dx, dy) = ((k % 64) as f64 - 30.0, (k / 64) as f64 - 32.0);
+            *m = dx.hypot(dy) > 3.0;
+        }
+        let r = segment_flat(&map, &rest, &mask);
+        assert!(r.is_none_or(|r| r.enclosed_cells == 0), "{r:?}");
     }
 
     #[test]
