@@ -310,9 +310,10 @@ pub fn segment_supported(
         // threshold and the few it encloses.
         b.cells = if ring { best_cells.len() } else { b.cells } + holes.len();
     }
-    if best
-        .as_ref()
-        .is_none_or(|b| (b.cells as f64) * cell_mm2 < params.min_area_mm2)
+    if relative
+        && best
+            .as_ref()
+            .is_none_or(|b| (b.cells as f64) * cell_mm2 < params.min_area_mm2)
     {
         for j in roi.j0..roi.j1 {
             for i in roi.i0..roi.i1 {
@@ -1030,13 +1031,7 @@ mod tests {
         }
         v[66] = 0.3;
         let (map, rest) = maps(v, 10, 10);
-        let r = segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 100]),
-            &loose(),
-            1.0,
-        )
-        .unwrap();
+        let r = segment_flat(&map, &rest, &[true; 100]).unwrap();
         assert_eq!(r.cells, 5);
         assert!((r.centre.x - 6.0).abs() < 0.5 && (r.centre.y - 6.0).abs() < 0.5);
     }
@@ -1174,13 +1169,7 @@ mod tests {
                 }
             }
             let (map, rest) = maps(v, 80, 80);
-            let r = segment(
-                &map,
-                &DensityReference::flat(&rest, &[true; 6400]),
-                &loose(),
-                1.0,
-            )
-            .unwrap();
+            let r = segment_flat(&map, &rest, &[true; 6400]).unwrap();
             assert!(
                 (r.centre.x - want_x).abs() < 0.5 && (r.centre.y - 40.0).abs() < 0.5,
                 "radius {radius}: {:?}",
@@ -1224,13 +1213,7 @@ mod tests {
             ..map.clone()
         };
         let want = grid.point(cx, cy);
-        let ring = segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 1600]),
-            &loose(),
-            1.0,
-        )
-        .unwrap();
+        let ring = segment_flat(&map, &rest, &[true; 1600]).unwrap();
         let off = (ring.centre.x - want.x).hypot(ring.centre.y - want.y);
         assert!(off < 2.0, "{:?} vs {want:?}", ring.centre);
         let mut no_extent = loose();
@@ -1440,20 +1423,8 @@ mod tests {
     #[test]
     fn nan_and_mismatched_inputs_give_no_region() {
         let (map, rest) = maps(vec![f32::NAN; 16], 4, 4);
-        assert!(segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 16]),
-            &loose(),
-            1.0
-        )
-        .is_none());
-        assert!(segment(
-            &map,
-            &DensityReference::flat(&rest, &[true; 3]),
-            &loose(),
-            1.0
-        )
-        .is_none());
+        assert!(segment_flat(&map, &rest, &[true; 16]).is_none());
+        assert!(segment_flat(&map, &rest, &[true; 3]).is_none());
     }
 
     #[test]
