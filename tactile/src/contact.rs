@@ -370,7 +370,22 @@ pub fn segment_supported(
         }
         mean.mean()
     };
-    let wide = enclosed_cells > 0 || radius_cells > CENTROID_RADIUS_H * params_reach_cells(map);
+    let wide_cells = CENTROID_RADIUS_H * params_reach_cells(map);
+    // Wide is also how wide the dent is at half its own depth (its cells
+    // nearer its lowest score than the extent; relative rule only): a
+    // shallow punch's flat bottom may stay above the threshold with only an
+    // arc of its edge below, which alone is narrow and centred on that arc
+    // (on the other renderer's seeds 1-3, ten shallow punches 6-26 px off,
+    // 0.1-7 px after; BENCHMARKS.md, session 25).
+    let half_depth_wide = || {
+        let half = depth + 0.5 * (extent - depth);
+        let n = best_cells
+            .iter()
+            .filter(|&&(ci, cj)| score(ci, cj) <= half)
+            .count();
+        (n as f64 / std::f64::consts::PI).sqrt() > wide_cells
+    };
+    let wide = enclosed_cells > 0 || radius_cells > wide_cells || (relative && half_depth_wide());
     let centre = if let Some(c) = wide.then(centroid).flatten() {
         c
     } else {
@@ -1123,6 +1138,60 @@ mod tests {
         let (map, rest) = maps(v, 80, 80);
         let r = segment_flat(&map, &rest, &[true; 6400]).expect("a closed band is a region");
         assert!(r.enclosed_cells > 150 && r.centre.x > 41.5, "{r:?}");
+    }
+
+    /// A dent 30 cells in radius around (40, 40) on a 90 x 90 map: `core`
+    /// within 26 cells, `left` on the rest of its left cap (x < 20), `edge`
+    /// on the rest of its outer band.
+    fn flat_dent_map(core: f32, left: f32, edge: f32) -> (DensityMap, DensityMap) {
+        let mut v = vec![1.0f32; 90 * 90];
+        for j in 0..90 {
+            for i in 0..90 {
+                let r = (i as f64 - 40.0).hypot(j as f64 - 40.0);
+                v[j * 90 + i] = match r {
+                    r if r < 26.0 => core,
+                    r if r <= 30.0 && i < 20 => left,
+                    r if r <= 30.0 => edge,
+                    _ => 1.0,
+                };
+            }
+        }
+        maps(v, 90, 90)
+    }
+
+    #[test]
+    fn a_shallow_flat_dent_is_centred_on_its_whole_bottom() {
+        // A shallow punch: its bottom at 0.84 of rest, above the 0.80
+        // threshold; only an arc of its edge, on the left, reaches 0.79.
+        // At half its depth (0.845) it is 26-30 cells in radius, wider than
+        // 1.5 kernel widths (22.5 cells): its centroid, not the arc's
+        // lowest cell 27 cells to the left.
+        let (map, rest) = flat_dent_map(0.84, 0.79, 0.86);
+        let r = segment_flat(&map, &rest, &[true; 8100]).unwrap();
+        assert_eq!(r.enclosed_cells, 0);
+        assert!(
+            (r.centre.x - 40.0).abs() < 4.0 && (r.centre.y - 40.0).abs() < 0.5,
+            "{:?}",
+            r.centre
+        );
+        // A deep dent with the same shallow skirt is narrow at half its
+        // depth: centred on its lowest cells, as before.
+        let mut v = map.values_per_mm2.clone();
+        for j in 0..90 {
+            for i in 0..90 {
+                let r = (i as f64 - 60.0).hypot(j as f64 - 40.0);
+                if r < 4.0 {
+                    v[j * 90 + i] = 0.5 + 0.02 * r as f32;
+                }
+            }
+        }
+        let (map, rest) = maps(v, 90, 90);
+        let r = segment_flat(&map, &rest, &[true; 8100]).unwrap();
+        assert!(
+            (r.centre.x - 60.0).abs() < 0.5 && (r.centre.y - 40.0).abs() < 0.5,
+            "{:?}",
+            r.centre
+        );
     }
 
     #[test]
