@@ -226,7 +226,10 @@ pub fn exact_at(markers: &[PointPx], p: PointPx, h_px: f64, mm_per_px: f64) -> f
 
 /// The fast path: f32, grid, truncated kernel, ROI only.
 fn fast(markers: &[PointPx], grid: Grid, roi: CellRect, setup: &DensitySetup) -> DensityMap {
-    let mut values = vec![0f32; grid.nx * grid.ny];
+    let n = grid.nx * grid.ny;
+    // `ROW_LANES` spare cells past the end: a window's rows are added
+    // `ROW_LANES` cells at a time (see below).
+    let mut values = vec![0f32; n + ROW_LANES];
     let h = setup.h_px;
     let norm = 1.0 / (std::f64::consts::TAU * h * h * setup.mm_per_px * setup.mm_per_px);
     let inv = 1.0 / (2.0 * h * h);
@@ -266,19 +269,41 @@ fn fast(markers: &[PointPx], grid: Grid, roi: CellRect, setup: &DensitySetup) ->
         gaussian_samples(&mut gx, d0x, step, win.i1 - win.i0, inv, ratio_step, 1.0);
         let d0y = grid.coord(win.j0 as f64) - m.y;
         gaussian_samples(&mut gy, d0y, step, win.j1 - win.j0, inv, ratio_step, norm);
-        for (j, &fy) in (win.j0..win.j1).zip(&gy) {
-            let row = &mut values[j * grid.nx + win.i0..j * grid.nx + win.i1];
-            for (v, &fx) in row.iter_mut().zip(&gx) {
-                *v += fy * fx;
+        if gx.len() <= ROW_LANES {
+            // A fixed-width row (the default kernel and step: 12 cells)
+            // unrolls and vectorises; the lanes past the window add 0.0 to
+            // the cells after it (the next ones of its row, or the next
+            // row's first, or the spare cells), which leaves them as they
+            // were.
+            let mut fx = [0f32; ROW_LANES];
+            fx[..gx.len()].copy_from_slice(&gx);
+            for (j, &fy) in (win.j0..win.j1).zip(&gy) {
+                let at = j * grid.nx + win.i0;
+                if let Some(row) = values.get_mut(at..at + ROW_LANES) {
+                    for (v, &f) in row.iter_mut().zip(&fx) {
+                        *v += fy * f;
+                    }
+                }
+            }
+        } else {
+            for (j, &fy) in (win.j0..win.j1).zip(&gy) {
+                let row = &mut values[j * grid.nx + win.i0..j * grid.nx + win.i1];
+                for (v, &fx) in row.iter_mut().zip(&gx) {
+                    *v += fy * fx;
+                }
             }
         }
     }
+    values.truncate(n);
     DensityMap {
         grid,
         roi,
         values_per_mm2: values,
     }
 }
+
+/// Cells of a density window's row added at once by [`fast`].
+const ROW_LANES: usize = 16;
 
 /// Fills `out` with `scale exp(-(d0 + k step)^2 inv)` for `k` in `0..n`,
 /// with two `exp` calls instead of `n`: successive samples of a Gaussian
@@ -436,6 +461,59 @@ mod tests {
             }
         }
         assert_eq!(part.at(2, 2), 0.0);
+    }
+
+    #[test]
+    fn row_lanes_past_a_window_change_nothing() {
+        // Step 8, h 15: windows of 12 cells, added `ROW_LANES` at a time.
+        // Markers at the frame's corners and edges, a ROI that ends inside
+        // the rows: every cell is the window-by-window sum to the bit, and
+        // the cells outside the ROI stay 0.
+        let mut markers = test_fixtures::hex_points(160, 120, 15.0);
+        markers.extend([
+            PointPx::new(159.5, 119.5),
+            PointPx::new(0.0, 119.0),
+            PointPx::new(159.0, 0.0),
+        ]);
+        let s = setup(160, 120, DensityMode::Fast, 8);
+        let grid = s.grid();
+        let roi = CellRect {
+            i0: 3,
+            j0: 2,
+            i1: 17,
+            j1: grid.ny,
+        };
+        let map = estimate(&markers, &s, Some(roi));
+        let inv = 1.0 / (2.0 * s.h_px * s.h_px);
+        let norm = 1.0 / (std::f64::consts::TAU * s.h_px * s.h_px * s.mm_per_px * s.mm_per_px);
+        let reach = s.truncate_sigmas * s.h_px;
+        let ratio_step = (-2.0 * 64.0 * inv).exp();
+        let mut want = vec![0f32; grid.nx * grid.ny];
+        let (mut gx, mut gy) = (Vec::new(), Vec::new());
+        for m in &markers {
+            let w = grid.cells_within(m.x - reach, m.y - reach, m.x + reach, m.y + reach);
+            let (i0, j0) = (w.i0.max(roi.i0), w.j0.max(roi.j0));
+            let (i1, j1) = (w.i1.min(roi.i1), w.j1.min(roi.j1));
+            if i0 >= i1 || j0 >= j1 {
+                continue;
+            }
+            let d0x = grid.coord(i0 as f64) - m.x;
+            gaussian_samples(&mut gx, d0x, 8.0, i1 - i0, inv, ratio_step, 1.0);
+            let d0y = grid.coord(j0 as f64) - m.y;
+            gaussian_samples(&mut gy, d0y, 8.0, j1 - j0, inv, ratio_step, norm);
+            assert!(gx.len() <= ROW_LANES);
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    want[j * grid.nx + i] += gy[j - j0] * gx[i - i0];
+                }
+            }
+        }
+        assert_eq!(map.values_per_mm2, want);
+        for j in 0..grid.ny {
+            for i in roi.i1..grid.nx {
+                assert_eq!(map.at(i, j), 0.0, "cell ({i}, {j})");
+            }
+        }
     }
 
     #[test]
