@@ -1807,7 +1807,7 @@ fn predicted(
 }
 
 /// [`predicted`], `None` with fewer than two displaced neighbours.
-fn predicted_from(
+pub(crate) fn predicted_from(
     near: &[PointPx],
     displaced: &[Option<PointPx>],
     neighbours: &[u32],

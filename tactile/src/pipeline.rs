@@ -161,27 +161,30 @@ impl Pipeline {
         // with the frame's noise, and whether two that it runs together are
         // told apart. The ones lost are taken to be at rest in the density.
         let mut in_field = vec![true; positions.len()];
+        // Per rest marker, whether the density has it.
+        let mut in_density = vec![false; cal.rest_markers.len()];
+        for k in markers.list.iter().filter_map(|m| m.followed_from) {
+            if let Some(f) = in_density.get_mut(k) {
+                *f = true;
+            }
+        }
         if let Some(sigma_px) = blur_px {
             let shift = cal.blur.shifts_at(sigma_px);
             let unsure =
                 |s: PointPx| s.x * s.x + s.y * s.y >= markers::BLUR_UNSURE_SHIFT_PX.powi(2);
-            let mut found = vec![false; cal.rest_markers.len()];
             for ((p, m), kept) in positions.iter_mut().zip(&markers.list).zip(&mut in_field) {
                 if let Some(k) = m.followed_from {
                     let s = shift(k);
                     (p.x, p.y) = (p.x - s.x, p.y - s.y);
                     *kept = !unsure(s);
-                    if let Some(f) = found.get_mut(k) {
-                        *f = true;
-                    }
                 }
             }
-            let hidden = cal.rest_markers.iter().enumerate();
-            positions.extend(
-                hidden
-                    .filter(|&(k, _)| !found[k] && unsure(shift(k)))
-                    .map(|(_, &r)| r),
-            );
+            for (k, &r) in cal.rest_markers.iter().enumerate() {
+                if !in_density[k] && unsure(shift(k)) {
+                    positions.push(r);
+                    in_density[k] = true;
+                }
+            }
         }
         let field = match search {
             // Each followed marker knows its rest marker, and so does each
@@ -236,6 +239,31 @@ impl Pipeline {
                 DensityMode::Exact => None,
                 DensityMode::Fast => Some(self.roi(&field)),
             };
+            // A lost marker that its neighbours' displacements put beyond
+            // the frame's edge, or within a marker radius of it, has left
+            // the view (the skin slid out of it), pressed or not: it counts
+            // in the density where they put it, not as a hole at the edge
+            // (the GelSight Mini's frame cuts its top row of dots in half; a
+            // finger's slide lost them, and their hole was the largest
+            // dent, BENCHMARKS.md, session 25).
+            let edge_px = cal.detector.radius_px;
+            let (x_max, y_max) = (
+                cal.width as f64 - 1.0 - edge_px,
+                cal.height as f64 - 1.0 - edge_px,
+            );
+            for k in (0..cal.rest_markers.len()).filter(|&k| !in_density[k]) {
+                let Some(q) = markers::predicted_from(
+                    &cal.rest_markers,
+                    &field.displacement,
+                    cal.neighbours.of(k),
+                    k,
+                ) else {
+                    continue;
+                };
+                if q.x < edge_px || q.y < edge_px || q.x > x_max || q.y > y_max {
+                    positions.push(q);
+                }
+            }
             let map = density::estimate(&positions, &cal.density, roi);
             density_cells = map.roi.area();
             t2 = Instant::now();

@@ -228,3 +228,66 @@ fn a_wide_flat_punch_is_found_and_centred_on_its_face() {
         assert!(err <= 4.0, "punch {k}: {err:.2} px off");
     }
 }
+
+#[test]
+fn dots_the_frame_edge_cuts_leave_no_hole_when_the_skin_slides_out() {
+    // A GelSight Mini's frame cuts its top row of dots in half. Here a
+    // sparse rounded rectangle's frames lose their rows above 1.5 px short
+    // of its first row, and a slide centred above the frame moves that row
+    // up by about 12 px (no press): 6 dots leave the frame. Their hole must
+    // not outrank a shallow press (it did, 255 px off, when lost markers
+    // were holes wherever they went).
+    let cat = Category::RoundedRect;
+    let mut sensor = cat.sensor(640, 480, 5);
+    // GelSight's sparse lattice: a pitch twice the kernel width.
+    sensor.pitch_px = 32.0;
+    sensor.marker_diameter_px = 10.0;
+    // (No clamp: the frame, not the rim, ends the lattice.)
+    sensor.rim_clamp_px = None;
+    let rest = synth::rest_frame(&sensor, 1);
+    let top_px = rest
+        .rest_markers
+        .iter()
+        .map(|p| p.y)
+        .fold(f64::MAX, f64::min);
+    let cut = (top_px - 1.5).floor() as usize;
+    let crop = |f: &dexitac_tactile::frame::GreyFrame| {
+        let w = f.width();
+        dexitac_tactile::frame::GreyFrame::new(w, f.height() - cut, f.data()[cut * w..].to_vec())
+            .unwrap()
+    };
+    let params = Params::default();
+    let cal = calibrate::calibrate(&[crop(&rest.image)], &params).unwrap();
+    let (pitch, rest_n) = (cal.pitch_px, cal.rest_markers.len());
+    let pipe = dexitac_tactile::pipeline::Pipeline::new(cal, params);
+    for (k, x) in [250.0, 330.0, 390.0].into_iter().enumerate() {
+        let mut scene = cat.scene(&sensor, 400 + k as u64);
+        scene.dropout = 0.0;
+        let press = synth::Press {
+            centre: PointPx::new(x, 300.0),
+            width_px: 0.8 * pitch,
+            strength: 0.35,
+            shear_px: PointPx::new(0.0, 0.0),
+            flat_radius_px: 0.0,
+        };
+        let slide = synth::Press {
+            centre: PointPx::new(320.0, top_px - 60.0),
+            width_px: 2.0 * pitch,
+            strength: 0.0,
+            shear_px: PointPx::new(0.0, -15.0),
+            flat_radius_px: 0.0,
+        };
+        scene.presses = vec![press, slide];
+        let frame = synth::render(&scene);
+        let r = pipe.run(&crop(&frame.image)).unwrap();
+        assert!(
+            r.markers.len() + 3 <= rest_n,
+            "frame {k}: {} of {rest_n} markers: the slide cut none out",
+            r.markers.len()
+        );
+        let c = r.contact.expect("the press is found");
+        let (tx, ty) = (x, 300.0 - cut as f64);
+        let err = (c.centre.x - tx).hypot(c.centre.y - ty);
+        assert!(err <= 3.0, "frame {k}: {err:.2} px off, at {:?}", c.centre);
+    }
+}
