@@ -27,6 +27,11 @@
 //! moves 1 px or more stay out of the field, those it hid count as at rest
 //! in the density, and the frame's jitter is at least what the correction
 //! leaves on the gauges. The reported markers stay where they were found.
+//!
+//! A marker that left the frame (lost, and put beyond the frame's edge or
+//! within a marker radius of it by its neighbours' displacements) counts in
+//! the density where they put it, not as a hole; it stays out of the
+//! reported markers and the field.
 
 use std::time::Instant;
 
