@@ -1037,6 +1037,18 @@ mod tests {
         segment(map, &DensityReference::flat(rest, mask), &loose(), 1.0)
     }
 
+    /// A `w x h` map whose cell `(i, j)` is `f(i - cx, j - cy)`, row-major.
+    fn values_around(
+        w: usize,
+        h: usize,
+        (cx, cy): (f64, f64),
+        f: impl Fn(f64, f64) -> f32,
+    ) -> Vec<f32> {
+        (0..w * h)
+            .map(|k| f((k % w) as f64 - cx, (k / w) as f64 - cy))
+            .collect()
+    }
+
     #[test]
     fn largest_region_wins_and_centre_is_its_minimum() {
         let mut v = vec![1.0f32; 100];
@@ -1057,19 +1069,12 @@ mod tests {
     /// on its left; `mask_from` cells left of that column are off the mask.
     fn ring_map(mask_from: usize) -> (DensityMap, DensityMap, Vec<bool>) {
         let (w, h) = (64, 64);
-        let mut v = vec![1.0f32; w * h];
-        for j in 0..h {
-            for i in 0..w {
-                let (dx, dy) = (i as f64 - 30.0, j as f64 - 32.0);
-                let r = dx.hypot(dy);
-                v[j * w + i] = match r {
-                    r if r < 10.0 => 0.95,
-                    r if r <= 16.0 && dx < -10.0 => 0.70,
-                    r if r <= 16.0 => 0.85,
-                    _ => 1.0,
-                };
-            }
-        }
+        let v = values_around(w, h, (30.0, 32.0), |dx, dy| match dx.hypot(dy) {
+            r if r < 10.0 => 0.95,
+            r if r <= 16.0 && dx < -10.0 => 0.70,
+            r if r <= 16.0 => 0.85,
+            _ => 1.0,
+        });
         let mask = (0..w * h).map(|k| k % w >= mask_from).collect();
         let (map, rest) = maps(v, w, h);
         (map, rest, mask)
@@ -1104,18 +1109,12 @@ mod tests {
         // island at rest 8 cells in radius (7 % of its cells): no ring, so
         // the centroid leans to the deeper half (by 0.2 of the half-disc's
         // 12.7-cell centroid offset), as it does without the island.
-        let mut v = vec![1.0f32; 80 * 80];
-        for j in 0..80 {
-            for i in 0..80 {
-                let r = (i as f64 - 40.0).hypot(j as f64 - 40.0);
-                v[j * 80 + i] = match r {
-                    r if r < 8.0 => 0.95,
-                    r if r <= 30.0 && i > 40 => 0.3,
-                    r if r <= 30.0 => 0.5,
-                    _ => 1.0,
-                };
-            }
-        }
+        let v = values_around(80, 80, (40.0, 40.0), |dx, dy| match dx.hypot(dy) {
+            r if r < 8.0 => 0.95,
+            r if r <= 30.0 && dx > 0.0 => 0.3,
+            r if r <= 30.0 => 0.5,
+            _ => 1.0,
+        });
         let (map, rest) = maps(v, 80, 80);
         let r = segment_flat(&map, &rest, &[true; 6400]).unwrap();
         assert!(r.enclosed_cells > 150, "{}", r.enclosed_cells);
@@ -1144,18 +1143,12 @@ mod tests {
     /// within 26 cells, `left` on the rest of its left cap (x < 20), `edge`
     /// on the rest of its outer band.
     fn flat_dent_map(core: f32, left: f32, edge: f32) -> (DensityMap, DensityMap) {
-        let mut v = vec![1.0f32; 90 * 90];
-        for j in 0..90 {
-            for i in 0..90 {
-                let r = (i as f64 - 40.0).hypot(j as f64 - 40.0);
-                v[j * 90 + i] = match r {
-                    r if r < 26.0 => core,
-                    r if r <= 30.0 && i < 20 => left,
-                    r if r <= 30.0 => edge,
-                    _ => 1.0,
-                };
-            }
-        }
+        let v = values_around(90, 90, (40.0, 40.0), |dx, dy| match dx.hypot(dy) {
+            r if r < 26.0 => core,
+            r if r <= 30.0 && dx < -20.0 => left,
+            r if r <= 30.0 => edge,
+            _ => 1.0,
+        });
         maps(v, 90, 90)
     }
 
@@ -1222,14 +1215,13 @@ mod tests {
         // 1) whose lowest cell lies 20 cells off its middle: the centre is
         // the middle. Half that radius: the lowest point (the paper's).
         for (radius, want_x) in [(30.0, 40.0), (15.0, 60.0)] {
-            let mut v = vec![1.0f32; 80 * 80];
-            for j in 0..80 {
-                for i in 0..80 {
-                    if (i as f64 - 40.0).hypot(j as f64 - 40.0) <= radius {
-                        v[j * 80 + i] = 0.5;
-                    }
+            let mut v = values_around(80, 80, (40.0, 40.0), |dx, dy| {
+                if dx.hypot(dy) <= radius {
+                    0.5
+                } else {
+                    1.0
                 }
-            }
+            });
             v[40 * 80 + 60] = 0.3;
             if radius < 20.0 {
                 // Reach the low cell from the narrower dent.
@@ -1259,19 +1251,21 @@ mod tests {
         // is one region, centred on its middle.
         let (cx, cy) = (20.3, 18.6);
         let grid = Grid::new(40 * 8, 40 * 8, 8);
-        let mut v = vec![1.0f32; 40 * 40];
-        for j in 0..40 {
-            for i in 0..40 {
-                let (dx, dy) = (i as f64 - cx, j as f64 - cy);
-                let r = dx.hypot(dy);
-                if (r - 6.0).abs() <= 1.5 {
-                    let arc = (dy.atan2(dx) / std::f64::consts::TAU * 10.0).rem_euclid(1.0);
-                    v[j * 40 + i] = if arc < 0.6 { 0.78 } else { 0.84 };
-                } else if r < 4.5 {
-                    v[j * 40 + i] = 0.95;
+        let v = values_around(40, 40, (cx, cy), |dx, dy| {
+            let r = dx.hypot(dy);
+            if (r - 6.0).abs() <= 1.5 {
+                let arc = (dy.atan2(dx) / std::f64::consts::TAU * 10.0).rem_euclid(1.0);
+                if arc < 0.6 {
+                    0.78
+                } else {
+                    0.84
                 }
+            } else if r < 4.5 {
+                0.95
+            } else {
+                1.0
             }
-        }
+        });
         let map = DensityMap {
             grid,
             roi: grid.full(),
