@@ -18,6 +18,7 @@
 //!   BENCHMARKS.md.
 
 use crate::params::DensityMode;
+use crate::round::{ceil_i64, floor_i64};
 use crate::PointPx;
 
 /// A regular sampling grid over the working frame.
@@ -66,8 +67,13 @@ impl Grid {
     pub fn cells_within(&self, x0: f64, y0: f64, x1: f64, y1: f64) -> CellRect {
         let off = (self.step_px as f64 - 1.0) / 2.0;
         let s = self.step_px as f64;
-        let lo = |v: f64, n: usize| (((v - off) / s).ceil().max(0.0) as usize).min(n);
-        let hi = |v: f64, n: usize| ((((v - off) / s).floor() + 1.0).max(0.0) as usize).min(n);
+        // Integer rounding: no libm call per marker. (A NaN bound gives no
+        // cells.)
+        let lo = |v: f64, n: usize| (ceil_i64((v - off) / s).max(0) as usize).min(n);
+        let hi = |v: f64, n: usize| match (v - off) / s {
+            c if c.is_nan() => 0,
+            c => (floor_i64(c).saturating_add(1).max(0) as usize).min(n),
+        };
         CellRect {
             i0: lo(x0, self.nx),
             j0: lo(y0, self.ny),

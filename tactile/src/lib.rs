@@ -27,6 +27,7 @@ pub mod frame;
 pub mod markers;
 pub mod params;
 pub mod pipeline;
+mod round;
 pub mod sensor_setup;
 pub mod surface;
 #[cfg(feature = "synth")]

@@ -2990,13 +2990,21 @@ const MIN_LEVEL_RATIO_RANGE: (f32, f32) = (0.15, 0.5);
 const CELL_RADII: f64 = 3.5;
 
 /// Value at quantile `q` (0..=1) of `v` (0 for an empty vector).
-pub(crate) fn percentile(mut v: Vec<f32>, q: f64) -> f32 {
+pub(crate) fn percentile(v: Vec<f32>, q: f64) -> f32 {
     if v.is_empty() {
         return 0.0;
     }
     let k = ((v.len() - 1) as f64 * q).round() as usize;
-    let (_, x, _) = v.select_nth_unstable_by(k, f32::total_cmp);
-    *x
+    // Selected on integer keys in `f32::total_cmp`'s order (negative values
+    // with every bit flipped, the others with the sign bit set): an integer
+    // compare instead of the float's, the same value.
+    let key = |x: f32| {
+        let b = x.to_bits();
+        b ^ (((b as i32 >> 31) as u32) | 0x8000_0000)
+    };
+    let mut keys: Vec<u32> = v.into_iter().map(key).collect();
+    let k = *keys.select_nth_unstable(k).1;
+    f32::from_bits(k ^ ((((!k) as i32 >> 31) as u32) | 0x8000_0000))
 }
 
 /// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.
@@ -3187,7 +3195,7 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// How far [`refine`]'s window reaches either side of its centre for a
 /// marker of `radius_px`, px.
 pub(crate) fn window_reach_px(radius_px: f64) -> i64 {
-    radius_px.ceil() as i64 + 2
+    crate::round::ceil_i64(radius_px) + 2
 }
 
 /// The pixel [`refine`]'s window around `p` is centred on. Guesses are
@@ -3626,6 +3634,24 @@ mod tests {
                 narrow_moments(pixels, &win, min_contrast),
                 plain_moments(pixels, &win, min_contrast)
             );
+        }
+
+        /// The integer-key selection picks the value a sort by
+        /// `f32::total_cmp` puts at the quantile, to the bit: negative
+        /// values, both zeros, infinities and NaN included.
+        #[test]
+        fn percentile_is_the_sorted_value(
+            bits in proptest::collection::vec(proptest::prelude::any::<u32>(), 1..60),
+            small in proptest::collection::vec(-3.0f32..3.0, 0..60),
+            q in 0.0f64..=1.0,
+        ) {
+            let mut v: Vec<f32> = bits.into_iter().map(f32::from_bits).collect();
+            v.extend(small);
+            v.extend([0.0, -0.0]);
+            let mut sorted = v.clone();
+            sorted.sort_by(f32::total_cmp);
+            let want = sorted[((v.len() - 1) as f64 * q).round() as usize];
+            proptest::prop_assert_eq!(percentile(v, q).to_bits(), want.to_bits());
         }
 
         /// The 2x2 binning is the floor of each block's mean, for any width
