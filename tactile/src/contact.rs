@@ -664,7 +664,7 @@ pub fn locate(
             let mut near = near_markers(rest, field, r.centre, reach);
             near.retain(|&n| {
                 field.displacement[n]
-                    .is_none_or(|u| u.x.hypot(u.y) <= FIT_MAX_MOVE_PITCH * pitch_px)
+                    .is_none_or(|u| norm(u.x, u.y) <= FIT_MAX_MOVE_PITCH * pitch_px)
             });
             match tracking::radial_centre_on(surface, rest, field, &near, field.moved_px, 0.0) {
                 Some(fit)
@@ -906,7 +906,7 @@ fn median(v: &mut [f64]) -> Option<f64> {
 /// The displacement of rest marker `n`, px (`None` when lost).
 fn magnitude(field: &Field, n: usize) -> Option<f64> {
     let u = (*field.displacement.get(n)?)?;
-    Some(u.x.hypot(u.y))
+    Some(norm(u.x, u.y))
 }
 
 /// The most displaced moved marker, when that is a strong move
@@ -1000,8 +1000,15 @@ fn near_markers(rest: &[PointPx], field: &Field, c: PointPx, reach_px: f64) -> V
         .collect()
 }
 
+/// The distance from `a` to `b`, px (a square root: `hypot` is a libm
+/// call, and this runs per marker).
 fn dist(a: PointPx, b: PointPx) -> f64 {
-    (a.x - b.x).hypot(a.y - b.y)
+    norm(a.x - b.x, a.y - b.y)
+}
+
+/// The length of `(x, y)`.
+fn norm(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
 }
 
 #[cfg(test)]

@@ -3424,21 +3424,22 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
 /// [`narrow_moments`] in SSE2 (every x86-64 CPU has it), on the rows in
 /// place: the lane mask is one compare, the outline's minimum a few
 /// vector minima, and per row of weights one saturating subtract, one
-/// mask, one sum of absolute differences (the row's weight, for `sum w` and
-/// `sum w y`) and two multiply-adds by the lane index (`sum w x`). Exact
-/// (the proptest against [`plain_moments`]): every partial sum stays below
-/// 2^20. Measured with callgrind on the other renderer's 24 nominal dome
-/// frames (955 markers): 1000 -> 610 instructions a window, the pipeline
-/// 4.25 M -> 3.68 M a frame (BENCHMARKS.md, session 12).
+/// mask and four 16-bit adds (column sums, and their running total for
+/// `sum w y`); the sums over lanes come once at the end. Exact (the
+/// proptest against [`plain_moments`]): no lane overflows (bounds below).
+/// Measured with callgrind on the other renderer's 24 nominal dome frames
+/// (955 markers): 1000 -> 610 instructions a window, the pipeline 4.25 M
+/// -> 3.68 M a frame (BENCHMARKS.md, session 12); the column sums then
+/// took the pipeline from 3.64 M to 3.55 M (session 26).
 #[cfg(target_arch = "x86_64")]
 #[inline(never)]
 fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moments> {
     use std::arch::x86_64::{
-        __m128i, _mm_add_epi32, _mm_add_epi64, _mm_and_si128, _mm_andnot_si128, _mm_cmplt_epi8,
-        _mm_cvtsi128_si32, _mm_cvtsi128_si64, _mm_loadu_si128, _mm_madd_epi16, _mm_min_epu8,
-        _mm_mul_epu32, _mm_or_si128, _mm_sad_epu8, _mm_set1_epi32, _mm_set1_epi8, _mm_setr_epi16,
-        _mm_setr_epi8, _mm_setzero_si128, _mm_shuffle_epi32, _mm_srli_si128, _mm_storeu_si128,
-        _mm_subs_epu8, _mm_unpackhi_epi64, _mm_unpackhi_epi8, _mm_unpacklo_epi8,
+        __m128i, _mm_add_epi16, _mm_add_epi32, _mm_and_si128, _mm_andnot_si128, _mm_cmplt_epi8,
+        _mm_cvtsi128_si32, _mm_loadu_si128, _mm_madd_epi16, _mm_max_epu8, _mm_min_epu8,
+        _mm_or_si128, _mm_set1_epi16, _mm_set1_epi8, _mm_setr_epi16, _mm_setr_epi8,
+        _mm_setzero_si128, _mm_shuffle_epi32, _mm_srli_si128, _mm_storeu_si128, _mm_subs_epu8,
+        _mm_unpackhi_epi16, _mm_unpackhi_epi8, _mm_unpacklo_epi16, _mm_unpacklo_epi8,
     };
     let (rows, span) = (win.rows.clamp(1, LANES), win.span.clamp(1, LANES));
     // Every row must have LANES bytes: checked once, on the last.
@@ -3447,19 +3448,10 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
         return None;
     }
     let row_at = |j: usize| win.first + j * win.stride;
-    // The 3x3 (at most) around the guess: its first, middle and last
-    // columns of each of its rows.
+    // The 3x3 (at most) around the guess: columns `a..=b` of rows `c..=d`.
     let [a, b, c, d] = win.peak;
     let (b, d) = (b.min(span - 1), d.min(rows - 1));
     let (a, c) = (a.min(b), c.min(d));
-    let mid = (a + 1).min(b);
-    // A loop, not a fold: the fold's closure was not inlined (a call per
-    // window; the loop saves 2 % of a nominal frame's instructions).
-    let mut hi = 0u8;
-    for j in c..=d {
-        let r = row_at(j);
-        hi = hi.max(data[r + a]).max(data[r + mid]).max(data[r + b]);
-    }
     // SAFETY: SSE2 is part of x86-64; every load reads the LANES bytes at a
     // row start j < rows, all inside `data` (checked above), or a local
     // array of LANES bytes.
@@ -3468,7 +3460,17 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
         let zero = _mm_setzero_si128();
         let ones = _mm_set1_epi8(-1);
         let index = _mm_setr_epi8(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-        let keep = _mm_cmplt_epi8(index, _mm_set1_epi8(span as i8));
+        let below = |n: usize| _mm_cmplt_epi8(index, _mm_set1_epi8(n as i8));
+        let keep = below(span);
+        // The peak: the rows' maximum in the 3x3's lanes (those below
+        // `b + 1` and not below `a`), then the maximum across lanes.
+        let rows3 = _mm_max_epu8(_mm_max_epu8(row(c), row((c + 1).min(d))), row(d));
+        let mut top = _mm_andnot_si128(below(a), _mm_and_si128(below(b + 1), rows3));
+        top = _mm_max_epu8(top, _mm_srli_si128::<8>(top));
+        top = _mm_max_epu8(top, _mm_srli_si128::<4>(top));
+        top = _mm_max_epu8(top, _mm_srli_si128::<2>(top));
+        top = _mm_max_epu8(top, _mm_srli_si128::<1>(top));
+        let hi = _mm_cvtsi128_si32(top) as u8;
         // The outline: the first and last rows (the lanes past `span`
         // lifted out of the way), and the first and last columns of the
         // column minima.
@@ -3489,30 +3491,52 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
             .min(cols[span - 1]);
         let cut = half_maximum(lo, hi, min_contrast)?;
         let cut_v = _mm_set1_epi8(cut as i8);
-        let index_lo = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
-        let index_hi = _mm_setr_epi16(8, 9, 10, 11, 12, 13, 14, 15);
-        let (mut sw, mut sy, mut sx) = (zero, zero, zero);
+        // Per row, the weights widened to u16 lanes and added to the
+        // column sums `c`, and the column sums so far added to `t`: at the
+        // end, `c` holds each column's weight and `t` each column's
+        // `sum (rows - j) w`, so that `sum j w = rows c - t`. Per lane
+        // `c <= 16 x 255` and `t <= 136 x 255`, both below 2^16.
+        let (mut c_lo, mut c_hi, mut t_lo, mut t_hi) = (zero, zero, zero, zero);
         for j in 0..rows {
             let w = _mm_and_si128(_mm_subs_epu8(row(j), cut_v), keep);
-            // Two 64-bit lanes: the weights of lanes 0-7 and of 8-15.
-            let row_w = _mm_sad_epu8(w, zero);
-            sw = _mm_add_epi64(sw, row_w);
-            sy = _mm_add_epi64(sy, _mm_mul_epu32(row_w, _mm_set1_epi32(j as i32)));
-            // Weights (<= 255) times lanes (<= 15), in pairs: i32 lanes.
-            let x_lo = _mm_madd_epi16(_mm_unpacklo_epi8(w, zero), index_lo);
-            let x_hi = _mm_madd_epi16(_mm_unpackhi_epi8(w, zero), index_hi);
-            sx = _mm_add_epi32(sx, _mm_add_epi32(x_lo, x_hi));
+            c_lo = _mm_add_epi16(c_lo, _mm_unpacklo_epi8(w, zero));
+            c_hi = _mm_add_epi16(c_hi, _mm_unpackhi_epi8(w, zero));
+            t_lo = _mm_add_epi16(t_lo, c_lo);
+            t_hi = _mm_add_epi16(t_hi, c_hi);
         }
-        let sum64 = |v| (_mm_cvtsi128_si64(v) + _mm_cvtsi128_si64(_mm_unpackhi_epi64(v, v))) as u32;
-        let sx = _mm_add_epi32(sx, _mm_shuffle_epi32::<0b01_00_11_10>(sx));
-        let sx = _mm_add_epi32(sx, _mm_shuffle_epi32::<0b10_11_00_01>(sx));
+        // Column sums (< 2^15) times 1 and times the lane index, in pairs:
+        // i32 lanes. `t` can reach 2^15, so it is widened without a sign.
+        let one = _mm_set1_epi16(1);
+        let index_lo = _mm_setr_epi16(0, 1, 2, 3, 4, 5, 6, 7);
+        let index_hi = _mm_setr_epi16(8, 9, 10, 11, 12, 13, 14, 15);
+        let sw = _mm_madd_epi16(_mm_add_epi16(c_lo, c_hi), one);
+        let sx = _mm_add_epi32(
+            _mm_madd_epi16(c_lo, index_lo),
+            _mm_madd_epi16(c_hi, index_hi),
+        );
+        let st = _mm_add_epi32(
+            _mm_add_epi32(
+                _mm_unpacklo_epi16(t_lo, zero),
+                _mm_unpackhi_epi16(t_lo, zero),
+            ),
+            _mm_add_epi32(
+                _mm_unpacklo_epi16(t_hi, zero),
+                _mm_unpackhi_epi16(t_hi, zero),
+            ),
+        );
+        let sum32 = |v| {
+            let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b01_00_11_10>(v));
+            let v = _mm_add_epi32(v, _mm_shuffle_epi32::<0b10_11_00_01>(v));
+            _mm_cvtsi128_si32(v) as u32
+        };
+        let sw = sum32(sw);
         Some(Moments {
             lo,
             hi,
             cut,
-            sw: sum64(sw),
-            sx: _mm_cvtsi128_si32(sx) as u32,
-            sy: sum64(sy),
+            sw,
+            sx: sum32(sx),
+            sy: (rows as u32) * sw - sum32(st),
         })
     }
 }

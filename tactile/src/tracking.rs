@@ -419,7 +419,7 @@ pub fn radial_centre_on(
         .iter()
         .filter_map(|&n| {
             let u = (*field.displacement.get(n)?)?;
-            let len = u.x.hypot(u.y);
+            let len = norm(u.x, u.y);
             if !(len > noise_px && len.is_finite()) {
                 return None;
             }
@@ -432,7 +432,7 @@ pub fn radial_centre_on(
                     (a, (b.x - a.x, b.y - a.y))
                 }
             };
-            let d = dx.hypot(dy);
+            let d = norm(dx, dy);
             (d > 0.0 && d.is_finite()).then(|| (a, PointPx::new(dx / d, dy / d), len * len))
         })
         .collect();
@@ -443,7 +443,7 @@ pub fn radial_centre_on(
     };
     // Inlier tolerance of a line through `p` with weight |u|^2 at centre `c`.
     let tolerance = |p: PointPx, w: f64, c: PointPx| -> f64 {
-        let r = (c.x - p.x).hypot(c.y - p.y);
+        let r = norm(c.x - p.x, c.y - p.y);
         INLIER_PX.max(INLIER_SIGMAS * jitter_px * r / w.sqrt())
     };
     if lines.len() < 2 {
@@ -501,6 +501,12 @@ pub fn radial_centre_on(
         inlier_share: si / sw,
     };
     fit.centre.is_finite().then_some(fit)
+}
+
+/// The length of `(x, y)`: a square root (`hypot` is a libm call, and the
+/// fit takes one per marker and pass).
+fn norm(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
 }
 
 /// Distance of `c` from the line through `p` with unit direction `n`.
