@@ -3447,7 +3447,9 @@ fn narrow_moments(data: &[u8], win: &Window, min_contrast: f32) -> Option<Moment
     if last.checked_add(LANES)? > data.len() {
         return None;
     }
-    let row_at = |j: usize| win.first + j * win.stride;
+    // Wrapping: no overflow check per row (the last row's start was
+    // checked above, and every row starts before it).
+    let row_at = |j: usize| win.first.wrapping_add(j.wrapping_mul(win.stride));
     // The 3x3 (at most) around the guess: columns `a..=b` of rows `c..=d`.
     let [a, b, c, d] = win.peak;
     let (b, d) = (b.min(span - 1), d.min(rows - 1));
