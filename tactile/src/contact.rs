@@ -42,6 +42,7 @@
 //! ```
 
 use crate::density::DensityMap;
+use crate::numeric::select_f64;
 use crate::params::{CentreMethod, ContactParams, ThresholdMode};
 use crate::surface::{Surface, SurfaceMean};
 use crate::tracking::{self, Field};
@@ -812,7 +813,7 @@ fn common_displacement(field: &Field) -> PointPx {
             .flatten()
             .filter(|u| u.is_finite())
     };
-    let axis = |mut v: Vec<f64>| median(&mut v).unwrap_or(0.0);
+    let axis = |v: Vec<f64>| median(&v).unwrap_or(0.0);
     PointPx::new(
         axis(tracked().map(|u| u.x).collect()),
         axis(tracked().map(|u| u.y).collect()),
@@ -858,7 +859,7 @@ fn small_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
         support_px,
         t.field.jitter_px,
     )?;
-    let mut d: Vec<f64> = near
+    let d: Vec<f64> = near
         .iter()
         .filter(|&&n| magnitude(t.field, n).is_some_and(|m| m > t.field.moved_px))
         .map(|&n| dist(t.rest[n], fit.centre))
@@ -870,7 +871,7 @@ fn small_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
     if !ok {
         return None;
     }
-    Some(tracking_contact(fit.centre, median(&mut d)?, t.mm_per_px))
+    Some(tracking_contact(fit.centre, median(&d)?, t.mm_per_px))
 }
 
 /// The tracked markers the tracking-only rules of [`locate`] look at.
@@ -894,13 +895,9 @@ fn tracking_contact(centre: PointPx, radius_px: f64, mm_per_px: f64) -> Contact 
     }
 }
 
-/// The median of `v` (`None` when empty); reorders `v`.
-fn median(v: &mut [f64]) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    let k = v.len() / 2;
-    Some(*v.select_nth_unstable_by(k, f64::total_cmp).1)
+/// The median of `v` (`None` when empty; the upper of the middle two).
+fn median(v: &[f64]) -> Option<f64> {
+    select_f64(v.iter().copied(), v.len() / 2)
 }
 
 /// The displacement of rest marker `n`, px (`None` when lost).
@@ -980,7 +977,7 @@ fn shallow_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
             d.push(dist(t.rest[n], fit.centre));
         }
     }
-    let r_px = median(&mut d)?;
+    let r_px = median(&d)?;
     let resultant = sx.hypot(sy) / d.len() as f64;
     let ok = fit.n_inliers >= 2 * t.params.min_moved_markers
         && fit.inlier_share >= MIN_INLIER_SHARE

@@ -17,8 +17,8 @@
 //!   difference from the exact reference is measured in the tests and in
 //!   BENCHMARKS.md.
 
+use crate::numeric::{ceil_i64, floor_i64};
 use crate::params::DensityMode;
-use crate::round::{ceil_i64, floor_i64};
 use crate::PointPx;
 
 /// A regular sampling grid over the working frame.

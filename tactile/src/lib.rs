@@ -25,9 +25,9 @@ pub mod density;
 pub mod displacement;
 pub mod frame;
 pub mod markers;
+mod numeric;
 pub mod params;
 pub mod pipeline;
-mod round;
 pub mod sensor_setup;
 pub mod surface;
 #[cfg(feature = "synth")]

@@ -47,6 +47,7 @@
 
 use crate::area::SensingArea;
 use crate::frame::GreyFrame;
+use crate::numeric::{from_key_f32, key_f32};
 use crate::params::{MarkerParams, Polarity};
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
@@ -2526,8 +2527,24 @@ fn longest_chord_px(
     let (w, h) = (frame.width() as i64, frame.height() as i64);
     let data = frame.data();
     let (sx, sy, reach) = (sx as i64, sy as i64, reach as i64);
+    // Every step stays inside the frame: a run is a walk through `data`
+    // (the common case, and four compares fewer per pixel).
+    let inside = sx >= reach && sy >= reach && sx + reach < w && sy + reach < h;
     let chords_px = [(1, 0), (0, 1), (1, 1), (1, -1)].map(|(dx, dy): (i64, i64)| {
         let run = |sign: i64| {
+            if inside {
+                let step = sign * (dy * w + dx);
+                let mut at = sy * w + sx;
+                let mut n = 0;
+                while n < reach {
+                    at += step;
+                    if data[at as usize] < level {
+                        break;
+                    }
+                    n += 1;
+                }
+                return n as usize;
+            }
             (1..=reach)
                 .take_while(|&t| {
                     let (x, y) = (sx + sign * t * dx, sy + sign * t * dy);
@@ -2995,16 +3012,10 @@ pub(crate) fn percentile(v: Vec<f32>, q: f64) -> f32 {
         return 0.0;
     }
     let k = ((v.len() - 1) as f64 * q).round() as usize;
-    // Selected on integer keys in `f32::total_cmp`'s order (negative values
-    // with every bit flipped, the others with the sign bit set): an integer
+    // Selected on integer keys in `f32::total_cmp`'s order: an integer
     // compare instead of the float's, the same value.
-    let key = |x: f32| {
-        let b = x.to_bits();
-        b ^ (((b as i32 >> 31) as u32) | 0x8000_0000)
-    };
-    let mut keys: Vec<u32> = v.into_iter().map(key).collect();
-    let k = *keys.select_nth_unstable(k).1;
-    f32::from_bits(k ^ ((((!k) as i32 >> 31) as u32) | 0x8000_0000))
+    let mut keys: Vec<u32> = v.into_iter().map(key_f32).collect();
+    from_key_f32(*keys.select_nth_unstable(k).1)
 }
 
 /// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.
@@ -3195,7 +3206,7 @@ fn determinant_map(img: &[u8], w: usize, h: usize, lobe: usize, step: usize) -> 
 /// How far [`refine`]'s window reaches either side of its centre for a
 /// marker of `radius_px`, px.
 pub(crate) fn window_reach_px(radius_px: f64) -> i64 {
-    crate::round::ceil_i64(radius_px) + 2
+    crate::numeric::ceil_i64(radius_px) + 2
 }
 
 /// The pixel [`refine`]'s window around `p` is centred on. Guesses are
@@ -3678,6 +3689,30 @@ mod tests {
             sorted.sort_by(f32::total_cmp);
             let want = sorted[((v.len() - 1) as f64 * q).round() as usize];
             proptest::prop_assert_eq!(percentile(v, q).to_bits(), want.to_bits());
+        }
+
+        /// A chord's walk through the frame (a point at least `reach`
+        /// inside) ends where the checked one does: the same frame framed
+        /// by `reach` dark pixels puts every point that far inside.
+        #[test]
+        fn chords_walked_inside_match_the_checked_ones(
+            pixels in proptest::collection::vec(0u8..4, 9 * 7),
+            sx in 0usize..9,
+            sy in 0usize..7,
+            level in 1u8..4,
+            reach in 1usize..6,
+        ) {
+            let frame = GreyFrame::new(9, 7, pixels.clone()).unwrap();
+            let (pw, ph) = (9 + 2 * reach, 7 + 2 * reach);
+            let mut framed = vec![0u8; pw * ph];
+            for y in 0..7 {
+                framed[(y + reach) * pw + reach..][..9].copy_from_slice(&pixels[y * 9..][..9]);
+            }
+            let framed = GreyFrame::new(pw, ph, framed).unwrap();
+            proptest::prop_assert_eq!(
+                longest_chord_px(&frame, (sx, sy), level, reach),
+                longest_chord_px(&framed, (sx + reach, sy + reach), level, reach)
+            );
         }
 
         /// The 2x2 binning is the floor of each block's mean, for any width

@@ -25,6 +25,7 @@
 //! residual; [`radial_centre_noisy`] lets weak displacements take part with
 //! a tolerance that follows their direction uncertainty.
 
+use crate::numeric::select_f64;
 use crate::surface::Surface;
 use crate::PointPx;
 
@@ -214,18 +215,14 @@ pub const JITTER_QUANTILE: f64 = 0.25;
 /// [`JITTER_QUANTILE`] quantile is `sigma sqrt(-2 ln(1 - q))`. 0 with no
 /// matched marker.
 pub fn jitter_sigma_px(displacement: &[Option<PointPx>]) -> f64 {
-    let mut sq: Vec<f64> = displacement
+    let sq: Vec<f64> = displacement
         .iter()
         .flatten()
         .map(|u| u.x * u.x + u.y * u.y)
         .filter(|v| v.is_finite())
         .collect();
-    if sq.is_empty() {
-        return 0.0;
-    }
-    let k = ((sq.len() as f64 * JITTER_QUANTILE) as usize).min(sq.len() - 1);
-    let q = *sq.select_nth_unstable_by(k, f64::total_cmp).1;
-    rayleigh_sigma_px(q, JITTER_QUANTILE)
+    let k = ((sq.len() as f64 * JITTER_QUANTILE) as usize).min(sq.len().saturating_sub(1));
+    select_f64(sq, k).map_or(0.0, |q| rayleigh_sigma_px(q, JITTER_QUANTILE))
 }
 
 /// The per-axis sigma of isotropic Gaussian jitter whose magnitude's `q`

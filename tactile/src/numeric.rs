@@ -1,0 +1,115 @@
+//! Float helpers for the per-frame hot paths, exact to the bit.
+//!
+//! - Integer floor and ceiling of an `f64` without a libm call. The default
+//!   x86-64 target (SSE2) has no rounding instruction, so `f64::ceil` and
+//!   `f64::floor` are library calls; the per-marker hot paths (a centroid
+//!   window's reach, a density kernel's cells) make thousands a frame. A
+//!   truncating conversion and one compare give the same integers.
+//! - Integer keys in `total_cmp`'s order, so that a median is selected with
+//!   integer compares (the pipeline takes several medians over every
+//!   marker of a frame).
+
+/// `v.ceil() as i64`, for every `v` (NaN gives 0, out of range saturates,
+/// as the conversion does).
+pub(crate) fn ceil_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t + ((t as f64) < v && t < i64::MAX) as i64
+}
+
+/// `v.floor() as i64`, for every `v` (NaN gives 0, out of range saturates).
+pub(crate) fn floor_i64(v: f64) -> i64 {
+    let t = v as i64;
+    t - ((t as f64) > v && t > i64::MIN) as i64
+}
+
+/// The `u32` whose order is `f32::total_cmp`'s: negative values with every
+/// bit flipped, the others with the sign bit set.
+pub(crate) fn key_f32(x: f32) -> u32 {
+    let b = x.to_bits();
+    b ^ (((b as i32 >> 31) as u32) | 0x8000_0000)
+}
+
+/// The value of a [`key_f32`].
+pub(crate) fn from_key_f32(k: u32) -> f32 {
+    f32::from_bits(k ^ ((((!k) as i32 >> 31) as u32) | 0x8000_0000))
+}
+
+/// The `u64` whose order is `f64::total_cmp`'s ([`key_f32`] in 64 bits).
+pub(crate) fn key_f64(x: f64) -> u64 {
+    let b = x.to_bits();
+    b ^ (((b as i64 >> 63) as u64) | 0x8000_0000_0000_0000)
+}
+
+/// The value of a [`key_f64`].
+pub(crate) fn from_key_f64(k: u64) -> f64 {
+    f64::from_bits(k ^ ((((!k) as i64 >> 63) as u64) | 0x8000_0000_0000_0000))
+}
+
+/// The value a sort by `f64::total_cmp` puts at `k` (`None` past the end).
+pub(crate) fn select_f64(v: impl IntoIterator<Item = f64>, k: usize) -> Option<f64> {
+    let mut keys: Vec<u64> = v.into_iter().map(key_f64).collect();
+    (k < keys.len()).then(|| from_key_f64(*keys.select_nth_unstable(k).1))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn edges_match_the_library() {
+        for v in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.0 - f64::EPSILON,
+            -(2.0 - f64::EPSILON),
+            4503599627370495.5,
+            -4503599627370495.5,
+            9.3e18,
+            -9.3e18,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+        ] {
+            assert_eq!(ceil_i64(v), v.ceil() as i64, "ceil {v}");
+            assert_eq!(floor_i64(v), v.floor() as i64, "floor {v}");
+        }
+    }
+
+    proptest::proptest! {
+        /// Keys sort as `total_cmp` does and give back the same bits: any
+        /// pattern, so both zeros, infinities and NaN too.
+        #[test]
+        fn keys_keep_the_total_order(a in proptest::prelude::any::<u64>(), b in proptest::prelude::any::<u64>()) {
+            let (x, y) = (f64::from_bits(a), f64::from_bits(b));
+            proptest::prop_assert_eq!(key_f64(x).cmp(&key_f64(y)), x.total_cmp(&y));
+            proptest::prop_assert_eq!(from_key_f64(key_f64(x)).to_bits(), a);
+            let (x, y) = (f32::from_bits(a as u32), f32::from_bits(b as u32));
+            proptest::prop_assert_eq!(key_f32(x).cmp(&key_f32(y)), x.total_cmp(&y));
+            proptest::prop_assert_eq!(from_key_f32(key_f32(x)).to_bits(), a as u32);
+        }
+
+        /// The selection is the sorted value at `k`.
+        #[test]
+        fn selection_is_the_sorted_value(v in proptest::collection::vec(-5.0f64..5.0, 1..40), k in 0usize..40) {
+            let mut sorted = v.clone();
+            sorted.sort_by(f64::total_cmp);
+            proptest::prop_assert_eq!(select_f64(v, k), sorted.get(k).copied());
+        }
+
+        /// Any bit pattern: the same integer as the library's rounding
+        /// followed by the conversion.
+        #[test]
+        fn any_value_matches_the_library(bits in proptest::prelude::any::<u64>(), small in -1e6f64..1e6) {
+            for v in [f64::from_bits(bits), small] {
+                proptest::prop_assert_eq!(ceil_i64(v), v.ceil() as i64);
+                proptest::prop_assert_eq!(floor_i64(v), v.floor() as i64);
+            }
+        }
+    }
+}
