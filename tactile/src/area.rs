@@ -327,7 +327,9 @@ impl SensingArea {
         if p.x <= -0.5 || p.y <= -0.5 {
             return false;
         }
-        let (x, y) = ((p.x + 0.5) as usize, (p.y + 0.5) as usize);
+        // (Through i64: a float's `as usize` takes a longer sequence on
+        // x86-64; both are above -0.5 here, so non-negative.)
+        let (x, y) = ((p.x + 0.5) as i64 as usize, (p.y + 0.5) as i64 as usize);
         if y >= self.height {
             return false;
         }
