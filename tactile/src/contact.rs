@@ -42,7 +42,7 @@
 //! ```
 
 use crate::density::DensityMap;
-use crate::numeric::select_f64;
+use crate::numeric::{norm, select_f64};
 use crate::params::{CentreMethod, ContactParams, ThresholdMode};
 use crate::surface::{Surface, SurfaceMean};
 use crate::tracking::{self, Field};
@@ -997,15 +997,9 @@ fn near_markers(rest: &[PointPx], field: &Field, c: PointPx, reach_px: f64) -> V
         .collect()
 }
 
-/// The distance from `a` to `b`, px (a square root: `hypot` is a libm
-/// call, and this runs per marker).
+/// The distance from `a` to `b`, px.
 fn dist(a: PointPx, b: PointPx) -> f64 {
     norm(a.x - b.x, a.y - b.y)
-}
-
-/// The length of `(x, y)`.
-fn norm(x: f64, y: f64) -> f64 {
-    (x * x + y * y).sqrt()
 }
 
 #[cfg(test)]

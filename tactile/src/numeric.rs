@@ -1,4 +1,4 @@
-//! Float helpers for the per-frame hot paths, exact to the bit.
+//! Float helpers for the per-frame hot paths.
 //!
 //! - Integer floor and ceiling of an `f64` without a libm call. The default
 //!   x86-64 target (SSE2) has no rounding instruction, so `f64::ceil` and
@@ -8,6 +8,10 @@
 //! - Integer keys in `total_cmp`'s order, so that a median is selected with
 //!   integer compares (the pipeline takes several medians over every
 //!   marker of a frame).
+//!
+//! These give the library's results to the bit. [`norm`] is the one
+//! exception: a square root where `hypot`, a libm call, would differ by an
+//! ulp at most.
 
 /// `v.ceil() as i64`, for every `v` (NaN gives 0, out of range saturates,
 /// as the conversion does).
@@ -20,6 +24,12 @@ pub(crate) fn ceil_i64(v: f64) -> i64 {
 pub(crate) fn floor_i64(v: f64) -> i64 {
     let t = v as i64;
     t - ((t as f64) > v && t > i64::MIN) as i64
+}
+
+/// The length of `(x, y)`: `sqrt(x^2 + y^2)`. For the per-marker distances
+/// (their squares neither overflow nor underflow).
+pub(crate) fn norm(x: f64, y: f64) -> f64 {
+    (x * x + y * y).sqrt()
 }
 
 /// The `u32` whose order is `f32::total_cmp`'s: negative values with every

@@ -224,8 +224,7 @@ impl Dome {
             (p.x - self.centre.x) / self.radius_px,
             (p.y - self.centre.y) / self.radius_px,
         );
-        // (A square root, not `hypot`: a libm call per lifted point.)
-        let r = (x * x + y * y).sqrt();
+        let r = crate::numeric::norm(x, y);
         let r_max = MAX_POLAR_RAD.sin();
         let (x, y) = if r > r_max {
             (x * r_max / r, y * r_max / r)

@@ -25,7 +25,7 @@
 //! residual; [`radial_centre_noisy`] lets weak displacements take part with
 //! a tolerance that follows their direction uncertainty.
 
-use crate::numeric::select_f64;
+use crate::numeric::{norm, select_f64};
 use crate::surface::Surface;
 use crate::PointPx;
 
@@ -498,12 +498,6 @@ pub fn radial_centre_on(
         inlier_share: si / sw,
     };
     fit.centre.is_finite().then_some(fit)
-}
-
-/// The length of `(x, y)`: a square root (`hypot` is a libm call, and the
-/// fit takes one per marker and pass).
-fn norm(x: f64, y: f64) -> f64 {
-    (x * x + y * y).sqrt()
 }
 
 /// Distance of `c` from the line through `p` with unit direction `n`.
