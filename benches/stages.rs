@@ -1,6 +1,12 @@
 //! One criterion benchmark per pipeline stage on a synthetic 640x480 frame
 //! (nominal contact, default parameters: density grid step 8), plus the whole pipeline on a contact and a no-contact
-//! frame. `cargo bench -p dexitac --bench stages`.
+//! frame, and on contact frames in turn. `cargo bench -p dexitac-benches --bench stages`.
+//!
+//! A benchmark that runs one frame again and again lets the CPU's branch
+//! predictors learn that frame: `pipeline_contact_640x480_in_turn` runs
+//! `IN_TURN` different contact frames one after the other, as a camera
+//! or `dexitac analyze` would, and `..._each_repeated` the same frames, each
+//! again and again before the next (BENCHMARKS.md, session 26).
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
@@ -13,17 +19,23 @@ use dexitac_tactile::pipeline::Pipeline;
 use dexitac_tactile::synth::{self, Category, SynthFrame};
 use dexitac_tactile::{contact, markers, tracking};
 
-fn fixture() -> (Calibration, SynthFrame, SynthFrame) {
+/// Contact frames of `pipeline_contact_640x480_in_turn`.
+const IN_TURN: u64 = 16;
+
+fn fixture() -> (Calibration, SynthFrame, SynthFrame, Vec<SynthFrame>) {
     let sensor = Category::Nominal.sensor(640, 480, 1);
     let rest = synth::rest_frame(&sensor, 2);
     let cal = calibrate::calibrate(&[rest.image], &Params::default()).expect("calibrates");
     let pressed = synth::render(&Category::Nominal.scene(&sensor, 3));
     let idle = synth::render(&Category::NoContact.scene(&sensor, 4));
-    (cal, pressed, idle)
+    let in_turn = (0..IN_TURN)
+        .map(|k| synth::render(&Category::Nominal.scene(&sensor, 100 + k)))
+        .collect();
+    (cal, pressed, idle, in_turn)
 }
 
 fn stages(c: &mut Criterion) {
-    let (cal, pressed, idle) = fixture();
+    let (cal, pressed, idle, in_turn) = fixture();
     let params = Params::default();
     let img = &pressed.image;
     let rgb: Vec<u8> = img.data().iter().flat_map(|&v| [v, v, v]).collect();
@@ -94,6 +106,24 @@ fn stages(c: &mut Criterion) {
     });
     c.bench_function("pipeline_no_contact_640x480", |b| {
         b.iter(|| pipeline.run(black_box(&idle.image)).expect("size"))
+    });
+    let mut next = 0;
+    c.bench_function("pipeline_contact_640x480_in_turn", |b| {
+        b.iter(|| {
+            next = (next + 1) % in_turn.len();
+            pipeline.run(black_box(&in_turn[next].image)).expect("size")
+        })
+    });
+    // The same frames, each run its share of the iterations in a row.
+    c.bench_function("pipeline_contact_640x480_each_repeated", |b| {
+        b.iter_custom(|iters| {
+            let started = std::time::Instant::now();
+            for i in 0..iters {
+                let k = (i * IN_TURN / iters.max(1)) as usize;
+                black_box(pipeline.run(black_box(&in_turn[k].image)).expect("size"));
+            }
+            started.elapsed()
+        })
     });
 }
 
