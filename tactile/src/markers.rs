@@ -47,7 +47,7 @@
 
 use crate::area::SensingArea;
 use crate::frame::GreyFrame;
-use crate::numeric::{from_key_f32, key_f32};
+use crate::numeric::select_f32;
 use crate::params::{MarkerParams, Polarity};
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
@@ -3012,10 +3012,7 @@ pub(crate) fn percentile(v: Vec<f32>, q: f64) -> f32 {
         return 0.0;
     }
     let k = ((v.len() - 1) as f64 * q).round() as usize;
-    // Selected on integer keys in `f32::total_cmp`'s order: an integer
-    // compare instead of the float's, the same value.
-    let mut keys: Vec<u32> = v.into_iter().map(key_f32).collect();
-    from_key_f32(*keys.select_nth_unstable(k).1)
+    select_f32(v, k).unwrap_or(0.0)
 }
 
 /// 2x2 block average (floor of the sum / 4), dropping an odd last row/column.

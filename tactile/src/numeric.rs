@@ -55,6 +55,12 @@ pub(crate) fn from_key_f64(k: u64) -> f64 {
     f64::from_bits(k ^ ((((!k) as i64 >> 63) as u64) | 0x8000_0000_0000_0000))
 }
 
+/// The value a sort by `f32::total_cmp` puts at `k` (`None` past the end).
+pub(crate) fn select_f32(v: impl IntoIterator<Item = f32>, k: usize) -> Option<f32> {
+    let mut keys: Vec<u32> = v.into_iter().map(key_f32).collect();
+    (k < keys.len()).then(|| from_key_f32(*keys.select_nth_unstable(k).1))
+}
+
 /// The value a sort by `f64::total_cmp` puts at `k` (`None` past the end).
 pub(crate) fn select_f64(v: impl IntoIterator<Item = f64>, k: usize) -> Option<f64> {
     let mut keys: Vec<u64> = v.into_iter().map(key_f64).collect();
