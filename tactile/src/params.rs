@@ -280,9 +280,9 @@ pub enum CentreMethod {
     /// Argmin of the density (or density / rest density) over the region
     /// (the paper's Eq. 2), refined to sub-pixel.
     Density,
-    /// Density region, centre from the marker displacement field when the
-    /// markers around the region were tracked; contacts too small to dent the
-    /// density are found from tracked markers alone.
+    /// Density region; where markers around it are lost, the centre from
+    /// the tracked markers' displacement field; contacts too small to dent
+    /// the density are found from tracked markers alone.
     Hybrid,
 }
 
