@@ -42,7 +42,7 @@
 //! ```
 
 use crate::density::DensityMap;
-use crate::numeric::{norm, select_f64};
+use crate::numeric::{collect_bounded, norm, select_f64};
 use crate::params::{CentreMethod, ContactParams, ThresholdMode};
 use crate::surface::{Surface, SurfaceMean};
 use crate::tracking::{self, Field};
@@ -826,13 +826,12 @@ fn common_displacement(field: &Field) -> PointPx {
         field
             .displacement
             .iter()
-            .flatten()
-            .filter(|u| u.is_finite())
+            .filter_map(|u| u.filter(|u| u.is_finite()))
     };
     let axis = |v: Vec<f64>| median(&v).unwrap_or(0.0);
     PointPx::new(
-        axis(tracked().map(|u| u.x).collect()),
-        axis(tracked().map(|u| u.y).collect()),
+        axis(collect_bounded(tracked().map(|u| u.x))),
+        axis(collect_bounded(tracked().map(|u| u.y))),
     )
 }
 

@@ -47,7 +47,7 @@
 
 use crate::area::SensingArea;
 use crate::frame::GreyFrame;
-use crate::numeric::select_f32;
+use crate::numeric::{collect_bounded, select_f32};
 use crate::params::{MarkerParams, Polarity};
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
@@ -1423,7 +1423,10 @@ fn search_around(
     if covered as f64 > LOCAL_MAX_AREA * window_area as f64 {
         return None;
     }
-    let mut list: Vec<Marker> = found.iter().flatten().copied().collect();
+    // Room for the searched markers too (the lost ones' new places): the
+    // list is appended to, not copied.
+    let mut list: Vec<Marker> = Vec::with_capacity(found.len() + found.len() / 4);
+    list.extend(found.iter().flatten().copied());
     // A box is too small, and a contact's share of it too large, for its
     // own typical range: the followed markers' median contrast stands in.
     let typical_range = percentile(list.iter().map(|m| m.strength).collect(), 0.5);
@@ -1469,7 +1472,7 @@ fn search_around(
                 && p.y < b[3] as f64 + same_px
         })
     };
-    let in_reach: Vec<usize> = (0..list.len()).filter(|&j| near_box(list[j].pos)).collect();
+    let in_reach = collect_bounded((0..list.len()).filter(|&j| near_box(list[j].pos)));
     let followed_at: Vec<PointPx> = in_reach.iter().map(|&j| list[j].pos).collect();
     let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
     let mut searched: Vec<Marker> = Vec::new();
@@ -1917,18 +1920,22 @@ fn follow_each(
         }
         found.push(kept);
     }
-    let median = percentile(found.iter().flatten().map(|f| f.1).collect(), 0.5);
+    let median = percentile(
+        collect_bounded(found.iter().filter_map(|f| Some(f.as_ref()?.1))),
+        0.5,
+    );
     // Each marker's contrast over its own at rest, and the frame's light:
     // the median of that ratio.
     if let Some(contrast) = contrast {
         let at_rest = |k: usize| contrast.get(k).copied().filter(|&c| c > 0.0).unwrap_or(1.0);
         let ratio = |k: usize, c: f32| c / at_rest(k);
         let light = percentile(
-            found
-                .iter()
-                .enumerate()
-                .filter_map(|(k, f)| f.map(|f| ratio(k, f.1)))
-                .collect(),
+            collect_bounded(
+                found
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(k, f)| f.map(|f| ratio(k, f.1))),
+            ),
             0.5,
         );
         for (k, f) in found.iter_mut().enumerate() {

@@ -25,7 +25,7 @@
 //! residual; [`radial_centre_noisy`] lets weak displacements take part with
 //! a tolerance that follows their direction uncertainty.
 
-use crate::numeric::{norm, select_f64};
+use crate::numeric::{collect_bounded, norm, select_f64};
 use crate::surface::Surface;
 use crate::PointPx;
 
@@ -215,12 +215,10 @@ pub const JITTER_QUANTILE: f64 = 0.25;
 /// [`JITTER_QUANTILE`] quantile is `sigma sqrt(-2 ln(1 - q))`. 0 with no
 /// matched marker.
 pub fn jitter_sigma_px(displacement: &[Option<PointPx>]) -> f64 {
-    let sq: Vec<f64> = displacement
-        .iter()
-        .flatten()
-        .map(|u| u.x * u.x + u.y * u.y)
-        .filter(|v| v.is_finite())
-        .collect();
+    let sq = collect_bounded(displacement.iter().filter_map(|u| {
+        let u = (*u)?;
+        Some(u.x * u.x + u.y * u.y).filter(|v| v.is_finite())
+    }));
     let k = ((sq.len() as f64 * JITTER_QUANTILE) as usize).min(sq.len().saturating_sub(1));
     select_f64(sq, k).map_or(0.0, |q| rayleigh_sigma_px(q, JITTER_QUANTILE))
 }
@@ -334,19 +332,20 @@ fn match_rest(
 fn mark_moved(field: &mut Field, threshold_px: f64) {
     field.moved_px = threshold_px;
     let t2 = threshold_px * threshold_px;
-    field.moved = field
-        .displacement
-        .iter()
-        .enumerate()
-        // A lost marker moved; so did a NaN one.
-        .filter(|(_, u)| {
-            u.is_none_or(|u| {
-                let d2 = u.x * u.x + u.y * u.y;
-                d2 > t2 || d2.is_nan()
+    field.moved = collect_bounded(
+        field
+            .displacement
+            .iter()
+            .enumerate()
+            // A lost marker moved; so did a NaN one.
+            .filter(|(_, u)| {
+                u.is_none_or(|u| {
+                    let d2 = u.x * u.x + u.y * u.y;
+                    d2 > t2 || d2.is_nan()
+                })
             })
-        })
-        .map(|(n, _)| n)
-        .collect();
+            .map(|(n, _)| n),
+    );
 }
 
 /// A centre found from the displacement field.
