@@ -670,12 +670,13 @@ pub fn locate(
             let mut near = near_markers(rest, field, r.centre, reach);
             // Every marker around the dent tracked: the density holds them
             // all, and its centre stands. Pins pressed towards the camera
-            // also move outwards in the image (parallax), so their lines
-            // meet beyond the contact: on the other renderer's dome 1.75 px
-            // outwards (median of 24 frames; the density centre 0.44 px
-            // off), and by up to 4 px on its flat skin (BENCHMARKS.md,
-            // session 27). A lost marker is a hole the density reads as
-            // part of the dent; the lines do without it.
+            // also move in the image along the ray from its centre
+            // (parallax), so their lines meet off the contact: on the other
+            // renderer's dome 1.75 px outwards (median of 24 frames; the
+            // density centre 0.44 px off), on its flat skin about 5 px
+            // inwards (4 frames; BENCHMARKS.md, session 27). A lost marker
+            // is a hole the density reads as part of the dent; the lines do
+            // without it.
             if near.iter().all(|&n| field.displacement[n].is_some()) {
                 return Some(from_region(r));
             }
@@ -1685,7 +1686,8 @@ mod tests {
     }
 
     /// A dent 2 px from where the displacement lines of its markers meet
-    /// (pins pressed towards the camera move outwards in the image too):
+    /// (pins pressed towards the camera also move along the ray from the
+    /// image's centre):
     /// with every marker around it tracked, the dent keeps its density
     /// centre; with two of them lost (a hole the density reads as dent),
     /// the lines' meeting point replaces it.
