@@ -1687,10 +1687,9 @@ mod tests {
 
     /// A dent 2 px from where the displacement lines of its markers meet
     /// (pins pressed towards the camera also move along the ray from the
-    /// image's centre):
-    /// with every marker around it tracked, the dent keeps its density
-    /// centre; with two of them lost (a hole the density reads as dent),
-    /// the lines' meeting point replaces it.
+    /// image's centre): with every marker around it tracked, the dent keeps
+    /// its density centre; with two of them lost (a hole the density reads
+    /// as dent), the lines' meeting point replaces it.
     #[test]
     fn a_dent_keeps_its_density_centre_unless_markers_around_it_are_lost() {
         let c = PointPx::new(161.3, 158.2);

@@ -1472,7 +1472,7 @@ fn search_around(
                 && p.y < b[3] as f64 + same_px
         })
     };
-    let in_reach = collect_bounded((0..list.len()).filter(|&j| near_box(list[j].pos)));
+    let in_reach: Vec<usize> = (0..list.len()).filter(|&j| near_box(list[j].pos)).collect();
     let followed_at: Vec<PointPx> = in_reach.iter().map(|&j| list[j].pos).collect();
     let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
     let mut searched: Vec<Marker> = Vec::new();
@@ -1921,7 +1921,7 @@ fn follow_each(
         found.push(kept);
     }
     let median = percentile(
-        collect_bounded(found.iter().filter_map(|f| Some(f.as_ref()?.1))),
+        collect_bounded(found.iter().filter_map(|f| f.map(|f| f.1))),
         0.5,
     );
     // Each marker's contrast over its own at rest, and the frame's light:

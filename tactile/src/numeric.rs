@@ -1,4 +1,4 @@
-//! Float helpers for the per-frame hot paths.
+//! Float and collection helpers for the per-frame hot paths.
 //!
 //! - Integer floor and ceiling of an `f64` without a libm call. The default
 //!   x86-64 target (SSE2) has no rounding instruction, so `f64::ceil` and
@@ -8,6 +8,7 @@
 //! - Integer keys in `total_cmp`'s order, so that a median is selected with
 //!   integer compares (the pipeline takes several medians over every
 //!   marker of a frame).
+//! - [`collect_bounded`]: a filtered iterator's items in one allocation.
 //!
 //! These give the library's results to the bit. [`norm`] is the one
 //! exception: a square root where `hypot`, a libm call, would differ by an
@@ -61,6 +62,12 @@ pub(crate) fn select_f32(v: impl IntoIterator<Item = f32>, k: usize) -> Option<f
     (k < keys.len()).then(|| from_key_f32(*keys.select_nth_unstable(k).1))
 }
 
+/// The value a sort by `f64::total_cmp` puts at `k` (`None` past the end).
+pub(crate) fn select_f64(v: impl IntoIterator<Item = f64>, k: usize) -> Option<f64> {
+    let mut keys: Vec<u64> = v.into_iter().map(key_f64).collect();
+    (k < keys.len()).then(|| from_key_f64(*keys.select_nth_unstable(k).1))
+}
+
 /// `it` collected into a vector allocated once, at its upper size bound:
 /// `collect` on a filtered iterator starts from its lower bound, nothing,
 /// and reallocates as it grows (2 % of a frame's instructions in session
@@ -69,12 +76,6 @@ pub(crate) fn collect_bounded<T>(it: impl Iterator<Item = T>) -> Vec<T> {
     let mut v = Vec::with_capacity(it.size_hint().1.unwrap_or(0));
     v.extend(it);
     v
-}
-
-/// The value a sort by `f64::total_cmp` puts at `k` (`None` past the end).
-pub(crate) fn select_f64(v: impl IntoIterator<Item = f64>, k: usize) -> Option<f64> {
-    let mut keys: Vec<u64> = v.into_iter().map(key_f64).collect();
-    (k < keys.len()).then(|| from_key_f64(*keys.select_nth_unstable(k).1))
 }
 
 #[cfg(test)]

@@ -332,20 +332,19 @@ fn match_rest(
 fn mark_moved(field: &mut Field, threshold_px: f64) {
     field.moved_px = threshold_px;
     let t2 = threshold_px * threshold_px;
-    field.moved = collect_bounded(
-        field
-            .displacement
-            .iter()
-            .enumerate()
-            // A lost marker moved; so did a NaN one.
-            .filter(|(_, u)| {
-                u.is_none_or(|u| {
-                    let d2 = u.x * u.x + u.y * u.y;
-                    d2 > t2 || d2.is_nan()
-                })
+    field.moved = field
+        .displacement
+        .iter()
+        .enumerate()
+        // A lost marker moved; so did a NaN one.
+        .filter(|(_, u)| {
+            u.is_none_or(|u| {
+                let d2 = u.x * u.x + u.y * u.y;
+                d2 > t2 || d2.is_nan()
             })
-            .map(|(n, _)| n),
-    );
+        })
+        .map(|(n, _)| n)
+        .collect();
 }
 
 /// A centre found from the displacement field.
