@@ -1060,7 +1060,8 @@ impl BlurLevels {
 /// A followed marker keeps its followed centroid; a searched one is added
 /// where no followed marker lies within `reach_px` (it is the new place of
 /// a lost one), unless no lost one takes it and it lies beside a followed
-/// marker that no searched one confirmed: that one takes its centroid. A lost marker the local search still misses is put where
+/// marker in a box that no searched one confirmed, which then takes its
+/// centroid. A lost marker the local search still misses is put where
 /// its paired neighbours' displacements predict it when that pixel is
 /// clipped and no marker lies within [`RIDGE_CLEAR_PITCH`] (pins a press
 /// squeezed into one clipped ridge, which a blur leaves no neck to split
@@ -1365,8 +1366,8 @@ fn outline_roughness(
 /// marker whose place its neighbours' displacements predict within half a
 /// pitch ([`NEIGHBOUR_PITCH`], [`PAIR_ROUNDS`]). A searched marker still
 /// without a rest marker, within [`ORPHAN_PITCH`] of a followed marker in a
-/// box that the search did not confirm, is that marker's pin: the followed marker takes
-/// its centroid (`resettle_on_orphans`). A lost rest marker left
+/// box that the search did not confirm, is that marker's pin: the followed
+/// marker takes its centroid (`resettle_on_orphans`). A lost rest marker left
 /// whose predicted place is on a clipped ridge with no marker near is put
 /// there (`fill_clipped_ridges`). `None` when the boxes
 /// cover more than [`LOCAL_MAX_AREA`] of the search window. `frame` has
@@ -1707,8 +1708,9 @@ fn search_around(
 /// window that takes in part of a neighbour's is pulled towards it, by
 /// 2-6 px, while the search splits the plateau at its pins (on the
 /// renderer's dome at 2.5x the light, ten followed markers of one contact's
-/// ring were off their pins, and the search had found each pin beside
-/// them; BENCHMARKS.md, session 28). The followed marker takes the
+/// ring were 2-6 px off their pins, and the search had found the pin beside
+/// five of them; BENCHMARKS.md, session 28). Unclipped pins that a press
+/// squeezes show it too, less often. The followed marker takes the
 /// orphan's centroid, nearest pairs first, each once; the orphan goes.
 /// `reach_of` gives each followed marker's reach (0 where the search did
 /// not look), at most `max_reach_px`.
