@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import math
 import subprocess
 import sys
 import tempfile
@@ -67,6 +68,16 @@ def score(rest: np.ndarray, now: np.ndarray, pins_rest: np.ndarray, pins_now: np
     return out
 
 
+def check_seed(folder: Path, frame: str, truth, seed: int) -> None:
+    """Exits with a message when ``truth.csv`` does not hold the contact
+    that ``seed`` draws for ``frame``: the frames were rendered with another
+    ``--seed``, and every pin would be compared with the wrong contact."""
+    with (folder / "truth.csv").open() as f:
+        row = next((r for r in csv.DictReader(f) if r["frame"] == frame), None)
+    if row is None or math.hypot(float(row["cx"]) - truth[0], float(row["cy"]) - truth[1]) > 1e-3:
+        sys.exit(f"{folder}: frame {frame} is not the contact --seed {seed} draws; give the --seed render.py had")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", required=True, help="the dexitac binary")
@@ -94,7 +105,8 @@ def main() -> int:
                 if contact is None:
                     continue
                 n += 1
-                pins_now, *_ = R.pins(sensor, contact)
+                pins_now, *_, truth = R.pins(sensor, contact)
+                check_seed(folder, frames[i].stem, truth, a.seed)
                 s = score(*read_field(field / f"{frames[i].stem}.csv"), pins_rest, pins_now)
                 for k in totals:
                     totals[k] += s[k]
