@@ -1668,8 +1668,8 @@ fn search_around(
         if !looked_at(m.pos) {
             return 0.0;
         }
-        let spacing_px = m.followed_from.map_or(pitch_px, |k| {
-            let r = near[k];
+        let at_rest = m.followed_from.and_then(|k| Some((k, *near.get(k)?)));
+        let spacing_px = at_rest.map_or(pitch_px, |(k, r)| {
             neighbours
                 .get_or_init(|| rest.neighbours_or_new(pitch_px))
                 .of(k)
