@@ -1428,6 +1428,15 @@ fn search_around(
     if covered as f64 > LOCAL_MAX_AREA * window_area as f64 {
         return None;
     }
+    // Whether `p` lies in a box grown by `grow_px` (shrunk, when negative).
+    let in_boxes = |p: PointPx, grow_px: f64| {
+        boxes.iter().any(|b| {
+            p.x >= b[0] as f64 - grow_px
+                && p.x < b[2] as f64 + grow_px
+                && p.y >= b[1] as f64 - grow_px
+                && p.y < b[3] as f64 + grow_px
+        })
+    };
     // Room for the searched markers too (the lost ones' new places): the
     // list is appended to, not copied.
     let mut list: Vec<Marker> = Vec::with_capacity(found.len() + found.len() / 4);
@@ -1458,28 +1467,16 @@ fn search_around(
                 && m.followed_from
                     .and_then(|k| near.get(k))
                     .is_some_and(|r| (p.x - r.x).powi(2) + (p.y - r.y).powi(2) <= still2);
-            !kept
-                && boxes.iter().any(|b| {
-                    p.x >= b[0] as f64 + inset
-                        && p.x < b[2] as f64 - inset
-                        && p.y >= b[1] as f64 + inset
-                        && p.y < b[3] as f64 - inset
-                })
+            !kept && in_boxes(p, -inset)
         })
         .collect();
     // The followed markers a searched centroid lands on (within `same_px`).
     let mut confirmed = vec![false; list.len()];
     // A searched marker lies in a box: only the followed markers within
     // `same_px` of one can be it (a contact's boxes hold a tenth of them).
-    let near_box = |p: PointPx| {
-        boxes.iter().any(|b| {
-            p.x >= b[0] as f64 - same_px
-                && p.x < b[2] as f64 + same_px
-                && p.y >= b[1] as f64 - same_px
-                && p.y < b[3] as f64 + same_px
-        })
-    };
-    let in_reach: Vec<usize> = (0..list.len()).filter(|&j| near_box(list[j].pos)).collect();
+    let in_reach: Vec<usize> = (0..list.len())
+        .filter(|&j| in_boxes(list[j].pos, same_px))
+        .collect();
     let followed_at: Vec<PointPx> = in_reach.iter().map(|&j| list[j].pos).collect();
     let followed_index = PointIndex::new(&followed_at, fw, fh, same_px);
     let mut searched: Vec<Marker> = Vec::new();
@@ -1558,11 +1555,12 @@ fn search_around(
         j += 1;
         !unconfirmed.get(j - 1).copied().unwrap_or(false)
     });
-    let mut j = 0;
-    confirmed.retain(|_| {
-        j += 1;
-        !unconfirmed.get(j - 1).copied().unwrap_or(false)
-    });
+    let confirmed: Vec<bool> = confirmed
+        .iter()
+        .zip(&unconfirmed)
+        .filter(|&(_, &dropped)| !dropped)
+        .map(|(&c, _)| c)
+        .collect();
     // Each searched marker is the nearest lost rest marker's within half a
     // pitch (nearest pairs first, each once). Then the ones a press moved
     // further: a lost rest marker's place is predicted from its paired
@@ -1653,19 +1651,14 @@ fn search_around(
             look.dedup();
         }
     }
-    // The search looked only inside the boxes: a followed marker outside
-    // them is not doubted.
-    let looked_at = |p: PointPx| {
-        boxes.iter().any(|b| {
-            p.x >= b[0] as f64 && p.x < b[2] as f64 && p.y >= b[1] as f64 && p.y < b[3] as f64
-        })
-    };
     // A doubted marker's reach: [`ORPHAN_PITCH`] of the spacing at its rest
     // place (its nearest rest neighbour, at most a pitch away), for a dome's
     // outer rings lie foreshortened to half a pitch.
     let neighbours = std::cell::OnceCell::new();
     let reach_of = |m: &Marker| {
-        if !looked_at(m.pos) {
+        // The search looked only inside the boxes: a followed marker
+        // outside them is not doubted.
+        if !in_boxes(m.pos, 0.0) {
             return 0.0;
         }
         let at_rest = m.followed_from.and_then(|k| Some((k, *near.get(k)?)));
