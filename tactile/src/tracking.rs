@@ -129,14 +129,17 @@ impl PointIndex {
         radius_px: f64,
     ) -> impl Iterator<Item = (usize, f64)> + 'a {
         let (cols, rows) = self.cells_around(q);
-        let r2 = radius_px * radius_px;
-        rows.flat_map(move |j| cols.clone().map(move |i| j * self.nx + i))
-            .flat_map(move |c| &self.items[self.starts[c] as usize..self.starts[c + 1] as usize])
-            .filter_map(move |&n| {
-                let p = points[n as usize];
-                let d2 = (p.x - q.x).powi(2) + (p.y - q.y).powi(2);
-                (d2 <= r2).then_some((n as usize, d2))
-            })
+        Within {
+            index: self,
+            points,
+            q,
+            r2: radius_px * radius_px,
+            i: cols.start,
+            cols,
+            rows,
+            at: 0,
+            end: 0,
+        }
     }
 
     /// The cells of the 3x3 around `q`'s cell that lie in the grid: the
@@ -186,6 +189,56 @@ impl PointIndex {
             }
         }
         best.map(|(n, d2)| (n, d2.sqrt()))
+    }
+}
+
+/// [`PointIndex::within`]'s points: the cells of the 3x3 row by row, each
+/// cell's points in turn. Written out: the chain of `flat_map`s it replaced
+/// cost about 740 instructions a call in the local search (4.5 % of its
+/// instructions on the other renderer's nominal frames).
+struct Within<'a> {
+    index: &'a PointIndex,
+    points: &'a [PointPx],
+    q: PointPx,
+    r2: f64,
+    cols: std::ops::Range<usize>,
+    rows: std::ops::Range<usize>,
+    /// The next column of the current row (`rows.start`).
+    i: usize,
+    /// The current cell's items still to look at.
+    at: usize,
+    end: usize,
+}
+
+impl Iterator for Within<'_> {
+    type Item = (usize, f64);
+
+    fn next(&mut self) -> Option<(usize, f64)> {
+        loop {
+            while self.at < self.end {
+                let n = self.index.items[self.at] as usize;
+                self.at += 1;
+                let p = self.points[n];
+                let d2 = (p.x - self.q.x).powi(2) + (p.y - self.q.y).powi(2);
+                if d2 <= self.r2 {
+                    return Some((n, d2));
+                }
+            }
+            if self.i >= self.cols.end {
+                self.rows.next()?;
+                self.i = self.cols.start;
+                continue;
+            }
+            if self.rows.is_empty() {
+                return None;
+            }
+            let c = self.rows.start * self.index.nx + self.i;
+            self.i += 1;
+            (self.at, self.end) = (
+                self.index.starts[c] as usize,
+                self.index.starts[c + 1] as usize,
+            );
+        }
     }
 }
 
