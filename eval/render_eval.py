@@ -120,6 +120,19 @@ def row(name: str, m: dict) -> str:
     )
 
 
+def sheared(contact: dict) -> bool:
+    """Whether a ``contacts.csv`` row's indenter also pushed the skin sideways."""
+    return fnum(contact["shear_x_mm"]) != 0 or fnum(contact["shear_y_mm"]) != 0
+
+
+def shear_cell(pairs: list[tuple[dict, dict]]) -> str:
+    """One cell of the shear table: error median / p95 (found / contact frames)."""
+    m = score(pairs)
+    if "e_med" not in m:
+        return f"– ({m.get('found', 0)}/{m.get('contact', 0)})"
+    return f"{m['e_med']:.2f} / {m['e_p95']:.2f} ({m['found']}/{m['contact']})"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--dexitac", required=True)
@@ -147,6 +160,7 @@ def main() -> int:
     ]
     every: list[tuple[dict, dict]] = []
     by_kind: dict[str, list[tuple[dict, dict]]] = {}
+    by_shear: dict[str, dict[bool, list[tuple[dict, dict]]]] = {}
     notes = []
     for c in cats:
         d = root / c
@@ -161,10 +175,11 @@ def main() -> int:
         pairs = [(t, pred.get(t["frame"])) for t in truth]
         every += pairs
         if (d / "contacts.csv").exists():
-            kind = {r["frame"]: r["kind"] for r in read_csv(d / "contacts.csv")}
+            contacts = {r["frame"]: r for r in read_csv(d / "contacts.csv")}
             for t, p in pairs:
-                if t["frame"] in kind:
-                    by_kind.setdefault(kind[t["frame"]], []).append((t, p))
+                if t["frame"] in contacts:
+                    by_kind.setdefault(contacts[t["frame"]]["kind"], []).append((t, p))
+                    by_shear.setdefault(c, {}).setdefault(sheared(contacts[t["frame"]]), []).append((t, p))
         m = score(pairs)
         lines.append(row(c, m))
         print(f"{c}: {len(rows)} frames in {wall:.1f} s wall", file=sys.stderr)
@@ -177,6 +192,12 @@ def main() -> int:
             med = f"{m['e_med']:.2f}" if "e_med" in m else "–"
             p95 = f"{m['e_p95']:.2f}" if "e_p95" in m else "–"
             lines.append(f"| {k} | {m['contact']} | {m['found']} ({m['found'] / max(m['contact'], 1):.0%}) | {med} | {p95} |")
+    if by_shear:
+        lines += ["", "Contact frames with and without a tangential shear (`contacts.csv`): "
+                  "centre error median / p95 px (frames found / contact frames):", "",
+                  "| category | without shear | with shear |", "|---|---|---|"]
+        for c, groups in by_shear.items():
+            lines.append(f"| {c} | {shear_cell(groups.get(False, []))} | {shear_cell(groups.get(True, []))} |")
     if notes:
         lines += ["", "Notes:", *notes]
     text = "\n".join(lines) + "\n"
