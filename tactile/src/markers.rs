@@ -1108,7 +1108,7 @@ pub fn follow_or_search(
     let lost = found.iter().filter(|f| f.is_none()).count();
     let followed = || {
         // Sized once: a flattened list of options gives no size hint, and
-        // `collect` grew it eight times over (4 % of a contact-free frame).
+        // `collect` reallocated it eight times (4 % of a contact-free frame).
         let mut list = Vec::with_capacity(found.len());
         list.extend(found.iter().flatten().copied());
         Markers { list }
