@@ -68,13 +68,13 @@ def score(rest: np.ndarray, now: np.ndarray, pins_rest: np.ndarray, pins_now: np
     return out
 
 
-def check_seed(folder: Path, frame: str, truth, seed: int) -> None:
-    """Exits with a message when ``truth.csv`` does not hold the contact
-    that ``seed`` draws for ``frame``: the frames were rendered with another
-    ``--seed``, and every pin would be compared with the wrong contact."""
-    with (folder / "truth.csv").open() as f:
-        row = next((r for r in csv.DictReader(f) if r["frame"] == frame), None)
-    if row is None or math.hypot(float(row["cx"]) - truth[0], float(row["cy"]) - truth[1]) > 1e-3:
+def check_seed(folder: Path, truth: dict, frame: str, centre, seed: int) -> None:
+    """Exits with a message when ``truth`` (``truth.csv``'s rows by frame)
+    does not hold the contact centre that ``seed`` draws for ``frame``: the
+    frames were rendered with another ``--seed``, and every pin would be
+    compared with the wrong contact."""
+    row = truth.get(frame)
+    if row is None or math.hypot(float(row["cx"]) - centre[0], float(row["cy"]) - centre[1]) > 1e-3:
         sys.exit(f"{folder}: frame {frame} is not the contact --seed {seed} draws; give the --seed render.py had")
 
 
@@ -93,7 +93,16 @@ def main() -> int:
         sensor = R.sensor_of(cat, a.seed)
         pins_rest, *_ = R.pins(sensor, None)
         totals = {"all": np.zeros(4, int), "moved": np.zeros(4, int)}
-        n = 0
+        # The pins of each contact frame, checked against truth.csv before
+        # dexitac runs.
+        with (folder / "truth.csv").open() as f:
+            truth = {r["frame"]: r for r in csv.DictReader(f)}
+        pressed = []
+        for i, _, contact in R.frame_contacts(cat, sensor, a.seed, len(frames)):
+            if contact is not None:
+                pins_now, *_, centre = R.pins(sensor, contact)
+                check_seed(folder, truth, frames[i].stem, centre, a.seed)
+                pressed.append((i, pins_now))
         with tempfile.TemporaryDirectory() as tmp:
             field = Path(tmp) / "field"
             subprocess.run(
@@ -101,18 +110,13 @@ def main() -> int:
                  "--field-out", str(field), *map(str, frames)],
                 check=True,
             )
-            for i, _, contact in R.frame_contacts(cat, sensor, a.seed, len(frames)):
-                if contact is None:
-                    continue
-                n += 1
-                pins_now, *_, truth = R.pins(sensor, contact)
-                check_seed(folder, frames[i].stem, truth, a.seed)
+            for i, pins_now in pressed:
                 s = score(*read_field(field / f"{frames[i].stem}.csv"), pins_rest, pins_now)
                 for k in totals:
                     totals[k] += s[k]
         al, mv = totals["all"], totals["moved"]
         share = lambda v: " | ".join(f"{x} ({100 * x / max(v.sum(), 1):.0f} %)" for x in v)  # noqa: E731
-        print(f"| {cat} | {n} | {' / '.join(map(str, al))} | {mv.sum()} | {share(mv)} |")
+        print(f"| {cat} | {len(pressed)} | {' / '.join(map(str, al))} | {mv.sum()} | {share(mv)} |")
     return 0
 
 
