@@ -1554,17 +1554,8 @@ fn search_around(
     // noise where its blob left: lost, its rest marker is matched among
     // the searched ones. One that stayed with its contrast is a faint
     // marker the search's thresholds miss (a dome's outer ring).
-    let mut j = 0;
-    list.retain(|_| {
-        j += 1;
-        !unconfirmed.get(j - 1).copied().unwrap_or(false)
-    });
-    let confirmed: Vec<bool> = confirmed
-        .iter()
-        .zip(&unconfirmed)
-        .filter(|&(_, &dropped)| !dropped)
-        .map(|(&c, _)| c)
-        .collect();
+    drop_marked(&mut list, &unconfirmed);
+    drop_marked(&mut confirmed, &unconfirmed);
     // Each searched marker is the nearest lost rest marker's within half a
     // pitch (nearest pairs first, each once). Then the ones a press moved
     // further: a lost rest marker's place is predicted from its paired
@@ -1773,11 +1764,14 @@ fn resettle_on_orphans(
         (m.pos, m.strength, m.area_px) = (s.pos, s.strength, s.area_px);
         (gone[o], moved[j]) = (true, true);
     }
-    let mut o = 0;
-    searched.retain(|_| {
-        o += 1;
-        !gone[o - 1]
-    });
+    drop_marked(searched, &gone);
+}
+
+/// `items` without those whose flag in `marked` is set (an item past the
+/// flags' end stays), in order.
+fn drop_marked<T>(items: &mut Vec<T>, marked: &[bool]) {
+    let mut flags = marked.iter();
+    items.retain(|_| !flags.next().copied().unwrap_or(false));
 }
 
 /// Per rest marker of `near`, the displacement of the marker of `markers`
@@ -4693,6 +4687,13 @@ mod tests {
             off_pin <= 110 && missed <= 226,
             "{off_pin} markers off the pins, {missed} pins without a marker"
         );
+    }
+
+    #[test]
+    fn marked_items_are_dropped_in_order_and_unflagged_ones_stay() {
+        let mut v = vec![1, 2, 3, 4, 5];
+        drop_marked(&mut v, &[false, true, false, true]);
+        assert_eq!(v, [1, 3, 5]);
     }
 
     #[test]
