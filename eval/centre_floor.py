@@ -14,6 +14,15 @@ centroid with each cell weighted by how far its ratio lies below 0.90 (the
 image-plane centroid; ``dexitac`` takes wide regions' centroids on the
 skin and weights the rim's cells by their rest density).
 
+With ``--dexitac BIN --frames DIR`` (DIR from ``render.py --out DIR``, same
+``--seed`` and ``--frames-per-category``) it also runs dexitac's own stages
+on those true places: it writes each frame's true pins in the format of
+``dexitac analyze --field-out`` and runs ``dexitac analyze --field-in`` on
+them (the rest calibrated from DIR's rest frame, as for the frames
+themselves). Those columns are what dexitac's field, density, region and
+centre make of perfect markers, in every way it has (tracked centres, the
+skin's chart, the rim's weights).
+
 What is left is the method's own error on this renderer, with perfect
 markers: where the pressed skin's density dent lies against the truth
 centre (the indenter's axis on the skin, in rest-frame pixels). Parallax
@@ -27,8 +36,11 @@ each cell by its rest density, i.e. by the skin area it covers.
 from __future__ import annotations
 
 import argparse
+import csv
 import math
+import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -68,6 +80,39 @@ def centre(
     return np.array([(w.sum(0) * gx).sum(), (w.sum(1) * gy).sum()]) / w.sum()
 
 
+def write_field(path: Path, rest_xy: np.ndarray, xy: np.ndarray) -> None:
+    """The true pins as ``dexitac analyze --field-in`` reads them: per pin in
+    the rest frame, its rest place and its place (empty when out of view)."""
+    seen = R.in_frame(xy)
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["rest_x", "rest_y", "x", "y"])
+        for k in np.flatnonzero(R.in_frame(rest_xy)):
+            at = [f"{v:.4f}" for v in xy[k]] if seen[k] else ["", ""]
+            w.writerow([f"{rest_xy[k, 0]:.4f}", f"{rest_xy[k, 1]:.4f}", *at])
+
+
+def dexitac_centres(dexitac: str, frames: Path, cat: str, fields: Path) -> dict[str, tuple[float, float]]:
+    """dexitac's contact centre per frame of ``frames/cat`` on the fields in ``fields``."""
+    out = fields / "pred.csv"
+    d = frames / cat
+    run = subprocess.run(
+        [dexitac, "-qq", "analyze", "--rest", str(d / "rest.png"), "--field-in", str(fields), "--out", str(out), str(d / "frames")],
+        capture_output=True,
+        text=True,
+    )
+    if run.returncode != 0:
+        raise SystemExit(f"dexitac analyze --field-in on {cat} failed:\n{run.stderr}")
+    with open(out, newline="") as f:
+        return {r["frame"]: (float(r["cx"]), float(r["cy"])) for r in csv.DictReader(f)}
+
+
+def stats(err: list[float], radial: list[float]) -> str:
+    if not err:
+        return "– | – | –"
+    return f"{np.median(err):.2f} | {np.percentile(err, 95):.2f} | {np.median(radial):+.2f}"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--seed", type=int, default=1)
@@ -79,11 +124,18 @@ def main() -> int:
         help="weight each cell also by its rest density (the skin area its pixels cover, pins being "
         "evenly spread on the skin): the centroid on the skin rather than in the image",
     )
+    ap.add_argument("--dexitac", help="dexitac binary: also run its own stages on the true places")
+    ap.add_argument("--frames", type=Path, help="render.py's output for --dexitac (same seed and frame count)")
     a = ap.parse_args()
+    if (a.dexitac is None) != (a.frames is None):
+        ap.error("--dexitac and --frames go together")
     gx = np.arange(0, R.W, STEP_PX) + (STEP_PX - 1) / 2
     gy = np.arange(0, R.H, STEP_PX) + (STEP_PX - 1) / 2
-    print("| category | contact frames | centred | error median px | p95 px | radial median px |")
-    print("|---|---|---|---|---|---|")
+    head = "| category | contact frames | centred | error median px | p95 px | radial median px |"
+    if a.dexitac:
+        head += " dexitac: centred | median px | p95 px | radial median px | false contacts |"
+    print(head)
+    print("|---" * (head.count("|") - 1) + "|")
     for cat in a.categories:
         sensor = R.sensor_of(cat, a.seed)
         rest_xy, _ = positions(sensor, None)
@@ -91,11 +143,18 @@ def main() -> int:
         mask = rest >= MASK_FRACTION * np.quantile(rest[rest > 0], 0.9)
         mid = np.array([R.W, R.H]) / 2
         err, radial, n = [], [], 0
-        for _, _, contact in R.frame_contacts(cat, sensor, a.seed, a.frames_per_category):
+        truths: dict[str, np.ndarray | None] = {}
+        tmp = tempfile.TemporaryDirectory() if a.dexitac else None
+        all_rest = R.pins(sensor, None)[0]
+        for i, _, contact in R.frame_contacts(cat, sensor, a.seed, a.frames_per_category):
+            all_xy, _, _, _, truth = R.pins(sensor, contact)
+            if tmp is not None:
+                write_field(Path(tmp.name) / f"{i:04d}.csv", all_rest, all_xy)
+            truths[f"{i:04d}"] = truth
             if contact is None:
                 continue
             n += 1
-            xy, truth = positions(sensor, contact)
+            xy = all_xy[R.in_frame(all_xy)]
             c = centre(kde(xy, gx, gy) / np.maximum(rest, 1e-12), mask, gx, gy, rest if a.area_weights else 1.0)
             if c is None:
                 continue
@@ -103,13 +162,24 @@ def main() -> int:
             out = (truth - mid) / max(float(np.linalg.norm(truth - mid)), 1e-9)
             err.append(float(np.hypot(*e)))
             radial.append(float(e @ out))
-        if not err:
-            print(f"| {cat} | {n} | 0 | – | – | – |")
-            continue
-        print(
-            f"| {cat} | {n} | {len(err)} | {np.median(err):.2f} | {np.percentile(err, 95):.2f} | "
-            f"{np.median(radial):+.2f} |"
-        )
+        row = f"| {cat} | {n} | {len(err)} | {stats(err, radial)} |"
+        if tmp is not None:
+            got = dexitac_centres(a.dexitac, a.frames, cat, Path(tmp.name))
+            d_err, d_radial, false = [], [], 0
+            for name, truth in truths.items():
+                cx, cy = got.get(name, (math.nan, math.nan))
+                if truth is None:
+                    false += int(math.isfinite(cx))
+                    continue
+                if not math.isfinite(cx):
+                    continue
+                e = np.array([cx, cy]) - truth
+                out = (truth - mid) / max(float(np.linalg.norm(truth - mid)), 1e-9)
+                d_err.append(float(np.hypot(*e)))
+                d_radial.append(float(e @ out))
+            row += f" {len(d_err)} | {stats(d_err, d_radial)} | {false} |"
+            tmp.cleanup()
+        print(row)
     return 0
 
 

@@ -517,3 +517,111 @@ fn a_rest_with_holes_is_replaced_by_one_from_the_frames_unless_kept() {
     assert!(err.contains("has holes"), "{err}");
     assert!(!err.contains("Using the rest estimated"), "{err}");
 }
+
+/// A `--field-in` CSV of the generator's true places: one row per true
+/// rest marker, `rest_x,rest_y,x,y`.
+fn write_true_field(frame: &SynthFrame, path: &Path) {
+    assert_eq!(frame.markers.len(), frame.rest_markers.len(), "no dropout");
+    let mut text = String::from("rest_x,rest_y,x,y\n");
+    for (r, m) in frame.rest_markers.iter().zip(&frame.markers) {
+        text.push_str(&format!("{:.4},{:.4},{:.4},{:.4}\n", r.x, r.y, m.x, m.y));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn field_in_runs_the_contact_stages_on_given_markers() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let (frames, fields) = (root.join("frames"), root.join("true"));
+    std::fs::create_dir(&frames).unwrap();
+    std::fs::create_dir(&fields).unwrap();
+    let sensor = Category::Nominal.sensor(640, 480, 21);
+    save_grey(&synth::rest_frame(&sensor, 1), &root.join("rest.png"));
+    let mut truth = Vec::new();
+    for k in 0..2u64 {
+        let f = synth::render(&Category::Nominal.scene(&sensor, 60 + k));
+        let name = format!("press_{k}");
+        save_grey(&f, &frames.join(format!("{name}.png")));
+        write_true_field(&f, &fields.join(format!("{name}.csv")));
+        truth.push((name, f.contacts[0]));
+    }
+    let idle = synth::render(&Category::NoContact.scene(&sensor, 70));
+    save_grey(&idle, &frames.join("idle.png"));
+    write_true_field(&idle, &fields.join("idle.csv"));
+    // One frame's CSV is garbled, another's is missing.
+    save_grey(&idle, &frames.join("garbled.png"));
+    std::fs::write(
+        fields.join("garbled.csv"),
+        "rest_x,rest_y,x,y\n1,2,three,4\n",
+    )
+    .unwrap();
+    save_grey(&idle, &frames.join("no_field.png"));
+    let rest = root.join("rest.png");
+    let analyze = |field_in: &Path, out: &Path, more: &[&str]| {
+        let mut args = vec![
+            "analyze",
+            "--rest",
+            rest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--field-in",
+            field_in.to_str().unwrap(),
+        ];
+        args.extend_from_slice(more);
+        args.push(frames.to_str().unwrap());
+        run(&args)
+    };
+    let out = root.join("true.csv");
+    let r = analyze(&fields, &out, &[]);
+    assert_eq!(r.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(stderr.contains("`three` is not a number"), "{stderr}");
+    assert!(stderr.contains("no_field.csv"), "{stderr}");
+    let (_, rows) = read_csv(&out);
+    assert_eq!(rows.len(), 3, "{rows:?}");
+    for (name, t) in &truth {
+        let row = rows.iter().find(|r| &r.0 == name).unwrap();
+        let err = (row.1 - t.x).hypot(row.2 - t.y);
+        assert!(err < 1.0, "{name}: ({}, {}) vs {t:?}", row.1, row.2);
+        assert!(row.3 > 500, "{name}: {} markers", row.3);
+    }
+    let idle_row = rows.iter().find(|r| r.0 == "idle").unwrap();
+    assert!(idle_row.1.is_nan(), "false contact on the true idle field");
+    // What --field-out writes, --field-in reads (a lost marker's x, y empty).
+    let (own, own_field) = (root.join("own.csv"), root.join("own"));
+    let r = run(&[
+        "analyze",
+        "--rest",
+        rest.to_str().unwrap(),
+        "--out",
+        own.to_str().unwrap(),
+        "--field-out",
+        own_field.to_str().unwrap(),
+        frames.join("press_0.png").to_str().unwrap(),
+        frames.join("idle.png").to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let back = root.join("back.csv");
+    let r = run(&[
+        "analyze",
+        "--rest",
+        rest.to_str().unwrap(),
+        "--out",
+        back.to_str().unwrap(),
+        "--field-in",
+        own_field.to_str().unwrap(),
+        frames.join("press_0.png").to_str().unwrap(),
+        frames.join("idle.png").to_str().unwrap(),
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let ((_, a), (_, b)) = (read_csv(&own), read_csv(&back));
+    assert_eq!(a.len(), 2);
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x.0, y.0);
+        assert_eq!(x.1.is_nan(), y.1.is_nan(), "{x:?} vs {y:?}");
+        if x.1.is_finite() {
+            assert!((x.1 - y.1).hypot(x.2 - y.2) < 2.5, "{x:?} vs {y:?}");
+        }
+    }
+}

@@ -623,6 +623,9 @@ pub enum Search {
     /// places outwards through their neighbours' displacements
     /// (`pair_detected`).
     Paired,
+    /// The caller gave each rest marker's place
+    /// ([`crate::pipeline::Pipeline::run_on_field`]).
+    Given,
 }
 
 /// Fraction of followed markers that may be lost for the frame to be

@@ -66,6 +66,15 @@ pub enum PipelineError {
         /// Calibrated height, px.
         want_h: usize,
     },
+    /// A field given to [`Pipeline::run_on_field`] does not have one place
+    /// per rest marker.
+    #[error("the field has {got} places, the calibration {want} rest markers")]
+    FieldLength {
+        /// Places given.
+        got: usize,
+        /// Rest markers.
+        want: usize,
+    },
 }
 
 /// Wall-clock time per stage, ms (single thread).
@@ -141,7 +150,6 @@ impl Pipeline {
                 want_h: cal.height,
             });
         }
-        let cp = &self.params.contact;
         let t0 = Instant::now();
         let (markers, search) = if self.params.markers.follow {
             markers::follow_or_search(
@@ -154,11 +162,77 @@ impl Pipeline {
         } else {
             (markers::detect(frame, &cal.detector), Search::Full)
         };
+        Ok(self.locate_in(markers, search, t0))
+    }
+
+    /// The stages after the markers on markers the caller found:
+    /// `places[k]` is where rest marker `k` of the calibration lies in the
+    /// frame (working px), `None` where it is lost, and `unpaired` are
+    /// markers with no rest marker (in the density, not in the field, as a
+    /// search's markers that no lost rest marker took). The field, the
+    /// density, the region and the centre are those [`Pipeline::run`] gives
+    /// for markers found there (no blur correction: the places are taken as
+    /// they are). For another tracker's markers, or a simulator's true pin
+    /// places: what the contact stages make of perfect markers.
+    pub fn run_on_field(
+        &self,
+        places: &[Option<PointPx>],
+        unpaired: &[PointPx],
+    ) -> Result<FrameResult, PipelineError> {
+        let want = self.calibration.rest_markers.len();
+        if places.len() != want {
+            return Err(PipelineError::FieldLength {
+                got: places.len(),
+                want,
+            });
+        }
+        let t0 = Instant::now();
+        let list = places
+            .iter()
+            .enumerate()
+            .filter_map(|(k, p)| {
+                let pos = p.filter(|p| p.is_finite())?;
+                Some(markers::Marker {
+                    pos,
+                    strength: 1.0,
+                    peak: 0,
+                    rel_level: 1.0,
+                    rel_strength: 1.0,
+                    area_px: 0.0,
+                    followed_from: Some(k),
+                })
+            })
+            .chain(
+                unpaired
+                    .iter()
+                    .filter(|p| p.is_finite())
+                    .map(|&pos| markers::Marker {
+                        pos,
+                        strength: 1.0,
+                        peak: 0,
+                        rel_level: 1.0,
+                        rel_strength: 1.0,
+                        area_px: 0.0,
+                        followed_from: None,
+                    }),
+            )
+            .collect();
+        Ok(self.locate_in(Markers { list }, Search::Given, t0))
+    }
+
+    /// Tracking, density, region and centre for `markers` found by
+    /// `search`; times from `t0` (the markers' stage began).
+    fn locate_in(&self, markers: Markers, search: Search, t0: Instant) -> FrameResult {
+        let cal = &self.calibration;
+        let cp = &self.params.contact;
         let t1 = Instant::now();
         // A frame blurrier than the rest: the centroids its blur alone moved
         // are put back ([`markers::BlurLevels`]) for the field and the
         // density (the markers stay where they were found).
-        let blur_fit = cal.blur.fit(&cal.rest_markers, &markers.list);
+        let blur_fit = match search {
+            Search::Given => None,
+            _ => cal.blur.fit(&cal.rest_markers, &markers.list),
+        };
         let blur_px = blur_fit.map(|f| f.0);
         let mut positions = markers.positions();
         // Markers the blur moves far ([`markers::BLUR_UNSURE_SHIFT_PX`]) are
@@ -195,18 +269,20 @@ impl Pipeline {
             // Each followed marker knows its rest marker, and so does each
             // one searched for around the lost ones or paired through its
             // neighbours: no matching.
-            Search::Followed | Search::Local | Search::Paired => tracking::track_known_adaptive(
-                &cal.rest_markers,
-                markers
-                    .list
-                    .iter()
-                    .zip(&positions)
-                    .zip(&in_field)
-                    .filter(|(_, &kept)| kept)
-                    .filter_map(|((m, &p), _)| Some((m.followed_from?, p))),
-                cp.move_noise_px,
-                cp.move_noise_sigmas,
-            ),
+            Search::Followed | Search::Local | Search::Paired | Search::Given => {
+                tracking::track_known_adaptive(
+                    &cal.rest_markers,
+                    markers
+                        .list
+                        .iter()
+                        .zip(&positions)
+                        .zip(&in_field)
+                        .filter(|(_, &kept)| kept)
+                        .filter_map(|((m, &p), _)| Some((m.followed_from?, p))),
+                    cp.move_noise_px,
+                    cp.move_noise_sigmas,
+                )
+            }
             Search::Full => tracking::track_adaptive(
                 &cal.rest_markers,
                 &positions,
@@ -313,7 +389,7 @@ impl Pipeline {
         };
         let t3 = Instant::now();
         let ms = |a: Instant, b: Instant| (b - a).as_secs_f64() * 1e3;
-        Ok(FrameResult {
+        FrameResult {
             markers,
             field,
             contact,
@@ -328,7 +404,7 @@ impl Pipeline {
                 segment_ms: ms(t2, t3),
                 total_ms: ms(t0, t3),
             },
-        })
+        }
     }
 
     /// Grid cells within `2 h` of any moved rest marker or its new position.
@@ -670,6 +746,85 @@ mod tests {
         assert!(
             right as f64 >= 0.85 * moved as f64 && far_right as f64 >= 0.8 * far as f64,
             "{right} of {moved} moved markers, {far_right} of {far} beyond half a pitch at their pins"
+        );
+    }
+
+    /// Each calibrated rest marker's place in `f`, from the generator's
+    /// truth (its nearest true rest marker within 1 px).
+    fn true_places(cal: &Calibration, f: &synth::SynthFrame) -> Vec<Option<PointPx>> {
+        assert_eq!(f.markers.len(), f.rest_markers.len(), "no dropout");
+        cal.rest_markers
+            .iter()
+            .map(|r| {
+                let (i, d) = f
+                    .rest_markers
+                    .iter()
+                    .map(|q| (q.x - r.x).hypot(q.y - r.y))
+                    .enumerate()
+                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
+                (d < 1.0).then(|| f.markers[i])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_given_field_is_located_as_the_markers_found_there() {
+        let params = Params::default();
+        let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
+        let sensor = Category::Nominal.sensor(640, 480, 5);
+        let p = Pipeline::new(cal, params);
+        let rest = &p.calibration.rest_markers;
+        for k in 0..4 {
+            let f = synth::render(&Category::Nominal.scene(&sensor, 100 + k));
+            // The pipeline's own field, given back: the same field and contact.
+            let own = p.run(&f.image).unwrap();
+            let places: Vec<Option<PointPx>> = rest
+                .iter()
+                .zip(&own.field.displacement)
+                .map(|(r, u)| u.map(|u| PointPx::new(r.x + u.x, r.y + u.y)))
+                .collect();
+            let unpaired: Vec<PointPx> = own
+                .markers
+                .list
+                .iter()
+                .filter(|m| m.followed_from.is_none())
+                .map(|m| m.pos)
+                .collect();
+            assert!(own.blur_px.is_none());
+            let given = p.run_on_field(&places, &unpaired).unwrap();
+            assert_eq!(given.search, Search::Given);
+            assert_eq!(given.field.lost, own.field.lost, "frame {k}");
+            let (a, b) = (own.contact.unwrap(), given.contact.unwrap());
+            let d = (a.centre.x - b.centre.x).hypot(a.centre.y - b.centre.y);
+            assert!(d < 0.01, "frame {k}: {:?} vs {:?}", a.centre, b.centre);
+            // The generator's true places: its truth centre, within 1 px.
+            let truth = p
+                .run_on_field(&true_places(&p.calibration, &f), &[])
+                .unwrap();
+            let (c, t) = (truth.contact.unwrap().centre, f.contacts[0]);
+            assert!(
+                (c.x - t.x).hypot(c.y - t.y) < 1.0,
+                "frame {k}: {c:?} vs {t:?}"
+            );
+        }
+        // Every marker at rest: no contact.
+        let still: Vec<Option<PointPx>> = rest.iter().copied().map(Some).collect();
+        let r = p.run_on_field(&still, &[]).unwrap();
+        assert!(r.contact.is_none() && r.skipped);
+    }
+
+    #[test]
+    fn a_field_without_a_place_per_rest_marker_is_an_error() {
+        let params = Params::default();
+        let cal = test_fixtures::calibrated(Category::Nominal, 640, 480, &params);
+        let n = cal.rest_markers.len();
+        let p = Pipeline::new(cal, params);
+        assert_eq!(
+            p.run_on_field(&vec![None; n + 1], &[]).unwrap_err(),
+            PipelineError::FieldLength {
+                got: n + 1,
+                want: n
+            }
         );
     }
 

@@ -11,6 +11,7 @@ use dexitac_tactile::displacement::ShiftTracker;
 use dexitac_tactile::frame::{self, GreyFrame, Prepared};
 use dexitac_tactile::params::Params;
 use dexitac_tactile::pipeline::Pipeline;
+use dexitac_tactile::tracking::PointIndex;
 use dexitac_tactile::PointPx;
 
 use crate::exit::Outcome;
@@ -57,6 +58,18 @@ pub struct AnalyzeArgs {
     /// shift is 1 px or more.
     #[arg(long, value_name = "DIR")]
     field_out: Option<PathBuf>,
+    /// Do not look for markers: read each frame's markers from
+    /// `DIR/<frame>.csv`, in the format `--field-out` writes (columns
+    /// `rest_x,rest_y,x,y`, input px; x, y empty for a lost marker), and run
+    /// the field, density and contact stages on them. Each row's rest place
+    /// is matched to the nearest rest marker of the calibration within half
+    /// a pitch, which is moved by the row's displacement (x - rest_x,
+    /// y - rest_y); a row with rest_x, rest_y empty is a marker without a
+    /// rest marker (in the density, not in the field). For another tracker's
+    /// markers, or a simulator's true pin places. The frames are still read
+    /// (their names and sizes).
+    #[arg(long, value_name = "DIR")]
+    field_in: Option<PathBuf>,
     /// Frames (PNG or JPEG files, or directories of them).
     #[arg(required = true, value_name = "FRAME")]
     frames: Vec<PathBuf>,
@@ -225,6 +238,7 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
             Outputs {
                 markers: args.markers_out.as_deref(),
                 field: args.field_out.as_deref(),
+                field_in: args.field_in.as_deref(),
             },
         ) {
             Ok(Row {
@@ -301,8 +315,15 @@ fn analyze_one(
         .map_err(|e| anyhow!("{e}"))?;
     // Frame preparation (grey, crop, rescale) counts as part of detection.
     let prepare_ms = t0.elapsed().as_secs_f64() * 1e3;
-    let r = pipeline.run(&prepared.grey).map_err(|e| anyhow!("{e}"))?;
     let file = |dir: &Path| dir.join(format!("{}.csv", label.replace('/', "__")));
+    let r = match outputs.field_in {
+        Some(dir) => {
+            let (places, unpaired) = read_field(&file(dir), &prepared, &pipeline.calibration)?;
+            pipeline.run_on_field(&places, &unpaired)
+        }
+        None => pipeline.run(&prepared.grey),
+    }
+    .map_err(|e| anyhow!("{e}"))?;
     if let Some(dir) = outputs.markers {
         write_markers(&file(dir), &prepared, &r.markers.positions())?;
     }
@@ -431,6 +452,8 @@ fn frame_labels(files: &[PathBuf]) -> Vec<String> {
 struct Outputs<'a> {
     markers: Option<&'a Path>,
     field: Option<&'a Path>,
+    /// Where each frame's markers are read from instead (`--field-in`).
+    field_in: Option<&'a Path>,
 }
 
 /// Creates `dir` for `flag`'s per-frame CSVs, or refuses one that holds
@@ -468,6 +491,98 @@ fn write_field(
         [rx, ry, x, y]
     });
     write_csv(path, ["rest_x", "rest_y", "x", "y"], rows)
+}
+
+/// A `--field-in` CSV (the `--field-out` format): per rest marker of
+/// `cal`, its place in the frame (working px, `None` when lost or without a
+/// row), and the markers with no rest place (rest_x, rest_y empty). A row's
+/// rest place is the nearest rest marker's within half a pitch, and the
+/// marker's place is that rest marker's moved by the row's displacement
+/// (another tracker's rest places differ from the calibration's by its own
+/// bias, which a displacement leaves out); rows whose rest place has none
+/// (a pin the calibration did not see at rest) are left out, and so is the
+/// farther of two rows for one rest marker.
+fn read_field(
+    path: &Path,
+    prepared: &Prepared,
+    cal: &calibrate::Calibration,
+) -> anyhow::Result<(Vec<Option<PointPx>>, Vec<PointPx>)> {
+    let at = |line: u64| format!("{} line {line}", path.display());
+    let mut rdr = csv::Reader::from_path(path)
+        .map_err(|e| anyhow!("no markers for this frame: {}: {e}", path.display()))?;
+    let header = rdr
+        .headers()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?
+        .clone();
+    let column = |name: &str| {
+        header.iter().position(|h| h.trim() == name).ok_or_else(|| {
+            anyhow!(
+                "{}: no column `{name}` (want rest_x,rest_y,x,y, as --field-out writes)",
+                path.display()
+            )
+        })
+    };
+    let cols = [
+        column("rest_x")?,
+        column("rest_y")?,
+        column("x")?,
+        column("y")?,
+    ];
+    let map = prepared.map();
+    let rest = &cal.rest_markers;
+    let reach_px = 0.5 * cal.pitch_px;
+    let index = PointIndex::spanning(rest, reach_px.max(1.0));
+    let mut places: Vec<Option<PointPx>> = vec![None; rest.len()];
+    let mut matched = vec![f64::INFINITY; rest.len()];
+    let mut unpaired = Vec::new();
+    let mut unmatched = 0usize;
+    for (n, record) in rdr.records().enumerate() {
+        let line = n as u64 + 2;
+        let record = record.map_err(|e| anyhow!("{}: {e}", at(line)))?;
+        let value = |c: usize| -> anyhow::Result<Option<f64>> {
+            let v = record.get(c).unwrap_or("").trim();
+            if v.is_empty() {
+                return Ok(None);
+            }
+            let x: f64 = v
+                .parse()
+                .map_err(|_| anyhow!("{}: `{v}` is not a number", at(line)))?;
+            if x.is_finite() {
+                Ok(Some(x))
+            } else {
+                Err(anyhow!("{}: `{v}` is not a finite number", at(line)))
+            }
+        };
+        let point = |cx: usize, cy: usize| -> anyhow::Result<Option<PointPx>> {
+            match (value(cols[cx])?, value(cols[cy])?) {
+                (Some(x), Some(y)) => Ok(Some(map.to_work(PointPx::new(x, y)))),
+                (None, None) => Ok(None),
+                _ => Err(anyhow!("{}: one coordinate of a point is empty", at(line))),
+            }
+        };
+        let (from, to) = (point(0, 1)?, point(2, 3)?);
+        match (from, to) {
+            (None, Some(p)) => unpaired.push(p),
+            (None, None) => {}
+            (Some(r), p) => match index.nearest(rest, r, reach_px) {
+                Some((k, d)) if d < matched[k] => {
+                    // The row's displacement, from the calibration's place.
+                    let moved =
+                        p.map(|p| PointPx::new(rest[k].x + p.x - r.x, rest[k].y + p.y - r.y));
+                    (places[k], matched[k]) = (moved, d);
+                }
+                Some(_) => unmatched += 1,
+                None => unmatched += 1,
+            },
+        }
+    }
+    if unmatched > 0 {
+        tracing::debug!(
+            "{}: {unmatched} row(s) without a rest marker of their own, left out",
+            path.display()
+        );
+    }
+    Ok((places, unpaired))
 }
 
 /// One row per marker: its centre, input px.
