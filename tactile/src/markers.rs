@@ -381,6 +381,8 @@ fn detect_split_in(
     let ii = integral(img, w, h);
     let mut taken = Occupancy::new([x0, y0, x1, y1]);
     let mut list = Vec::new();
+    // Per marker of `list`, whether only the fine determinant found it.
+    let mut found_squeezed: Vec<bool> = Vec::new();
     // A padded pixel's place is the nearest one of the window.
     let (inner_w, inner_h) = (w - pad[0] - pad[2], h - pad[1] - pad[3]);
     let to_work = |x: usize, y: usize| {
@@ -446,6 +448,8 @@ fn detect_split_in(
             }
         }
         let mut strength = determinant_at(&ii, w + 1, x, y, lobe).sqrt();
+        // Found only by the fine determinant at its centroid (below).
+        let mut squeezed = false;
         if strength < need(guess)
             && (bin > 1 || lobe > FINE_LOBE_PX)
             && det.surface.foreshortening(guess) < FINE_MAX_FORESHORTENING
@@ -457,6 +461,21 @@ fn detect_split_in(
             // blob again (on the other renderer's domes 2-4 of the outer
             // ring's pins were missed at rest, and so in every frame).
             strength = strength.max(fine_determinant(frame, guess).unwrap_or(0.0));
+        }
+        if strength < need(guess) && (bin > 1 || lobe > FINE_LOBE_PX) {
+            // A pin a press squeezed against its neighbour (the ring of
+            // crowded pins around a dent): the coarse lobes take in the
+            // neighbour and the determinant vanishes; at full resolution,
+            // at the blob's centroid, it is a blob again. Only in a local
+            // search, where the centroid was taken (on the other renderer's
+            // harsh light, a clear pin 37 px from a dent's centre had a
+            // determinant of 0; its hole moved the centre 5 px,
+            // BENCHMARKS.md, session 30).
+            if let Some((_, Some((c, _, _)))) = first_centroid {
+                let fine = fine_determinant(frame, c).unwrap_or(0.0);
+                squeezed = fine >= need(guess);
+                strength = strength.max(fine);
+            }
         }
         let (strength, guess) = if strength >= need(guess) {
             (strength, guess)
@@ -512,8 +531,25 @@ fn detect_split_in(
                     area_px,
                     followed_from: None,
                 });
+                found_squeezed.push(squeezed);
             }
         }
+    }
+    // A blob found only at full resolution is a pin on its own: beside
+    // another marker (a second candidate of an enlarged pin, whose window
+    // put its centroid 2-3 px off the first) it is that marker's.
+    if let Some(PinScale { pitch_px, .. }) = scale.filter(|_| found_squeezed.contains(&true)) {
+        let alone2 = (SQUEEZED_ALONE_PITCH * pitch_px).powi(2);
+        let beside: Vec<bool> = list
+            .iter()
+            .zip(&found_squeezed)
+            .map(|(m, &sq)| {
+                sq && list.iter().zip(&found_squeezed).any(|(o, &o_sq)| {
+                    !o_sq && (o.pos.x - m.pos.x).powi(2) + (o.pos.y - m.pos.y).powi(2) < alone2
+                })
+            })
+            .collect();
+        drop_marked(&mut list, &beside);
     }
     // A marker between two pins of a split blob (a candidate of the same
     // blob whose window saw too little of it to split) is neither.
@@ -2972,6 +3008,12 @@ fn bright_peaks(
     out
 }
 
+/// A marker that only [`fine_determinant`] at its centroid found (a pin a
+/// press squeezed against its neighbour) is dropped when another marker of
+/// the search lies within this many pitches: a squeezed neighbour is 0.6
+/// pitch away or more, a second candidate of one enlarged pin 2-3 px.
+const SQUEEZED_ALONE_PITCH: f64 = 0.4;
+
 /// The smallest DoH lobe, full-resolution px ([`fine_determinant`]).
 const FINE_LOBE_PX: usize = 3;
 /// [`fine_determinant`] is tried only where a dome's skin is seen at least
@@ -4231,6 +4273,48 @@ mod tests {
             );
         }
         assert_eq!(found.len() + 1, cal.rest_markers.len());
+    }
+
+    #[test]
+    fn a_pin_squeezed_against_its_neighbour_is_found_once() {
+        use crate::synth::{self, Category};
+        // The generator's two-colour scene 322: a pin the press pushed
+        // against its neighbour (433, 220) has no determinant at the
+        // binned scale, only at full resolution. Its dim scene 312: an
+        // enlarged pin has a second candidate whose centroid lies 2.3 px
+        // from the first.
+        let params = crate::params::Params::default();
+        for (cat, scene) in [(Category::TwoColour, 322), (Category::Dim, 312)] {
+            let cal = test_fixtures::calibrated(cat, 640, 480, &params);
+            assert_eq!(cal.detector.bin, 2, "{cat:?}: the binned scale is the case");
+            let f = synth::render(&cat.scene(&cat.sensor(640, 480, 5), scene));
+            let (found, search) = follow_or_search(
+                &f.image,
+                &cal.detector,
+                &cal.reference(),
+                0.3 * cal.pitch_px,
+                Some(cal.pitch_px),
+            );
+            assert_eq!(search, Search::Local, "{cat:?}");
+            let found = found.positions();
+            let near = |p: PointPx, list: &[PointPx], px: f64| {
+                list.iter().any(|q| (q.x - p.x).hypot(q.y - p.y) < px)
+            };
+            let missed: Vec<_> = f
+                .markers
+                .iter()
+                .filter(|&&t| !near(t, &found, 1.0))
+                .collect();
+            let extra: Vec<_> = found
+                .iter()
+                .filter(|&&m| !near(m, &f.markers, 1.5))
+                .collect();
+            assert!(
+                missed.is_empty() && extra.is_empty(),
+                "{cat:?}: missed {missed:?}, extra {extra:?}"
+            );
+            assert_eq!(found.len(), f.markers.len(), "{cat:?}");
+        }
     }
 
     #[test]
