@@ -187,34 +187,26 @@ impl Pipeline {
             });
         }
         let t0 = Instant::now();
+        // (Only the place and the rest marker count after the markers'
+        // stage.)
+        let given = |pos: PointPx, followed_from: Option<usize>| markers::Marker {
+            pos,
+            strength: 1.0,
+            peak: 0,
+            rel_level: 1.0,
+            rel_strength: 1.0,
+            area_px: 0.0,
+            followed_from,
+        };
         let list = places
             .iter()
             .enumerate()
-            .filter_map(|(k, p)| {
-                let pos = p.filter(|p| p.is_finite())?;
-                Some(markers::Marker {
-                    pos,
-                    strength: 1.0,
-                    peak: 0,
-                    rel_level: 1.0,
-                    rel_strength: 1.0,
-                    area_px: 0.0,
-                    followed_from: Some(k),
-                })
-            })
+            .filter_map(|(k, p)| Some(given(p.filter(|p| p.is_finite())?, Some(k))))
             .chain(
                 unpaired
                     .iter()
                     .filter(|p| p.is_finite())
-                    .map(|&pos| markers::Marker {
-                        pos,
-                        strength: 1.0,
-                        peak: 0,
-                        rel_level: 1.0,
-                        rel_strength: 1.0,
-                        area_px: 0.0,
-                        followed_from: None,
-                    }),
+                    .map(|&pos| given(pos, None)),
             )
             .collect();
         Ok(self.locate_in(Markers { list }, Search::Given, t0))

@@ -571,8 +571,8 @@ fn read_field(
                         p.map(|p| PointPx::new(rest[k].x + p.x - r.x, rest[k].y + p.y - r.y));
                     (places[k], matched[k]) = (moved, d);
                 }
-                Some(_) => unmatched += 1,
-                None => unmatched += 1,
+                // No rest marker, or a nearer row has it.
+                _ => unmatched += 1,
             },
         }
     }
