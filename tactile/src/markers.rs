@@ -1595,13 +1595,16 @@ fn search_around(
     // marker the search's thresholds miss (a dome's outer ring).
     drop_marked(&mut list, &unconfirmed);
     drop_marked(&mut confirmed, &unconfirmed);
-    // Each searched marker is the nearest lost rest marker's within half a
-    // pitch (nearest pairs first, each once). Then the ones a press moved
-    // further: a lost rest marker's place is predicted from its paired
-    // neighbours' displacements ([`predicted`]), and the searched markers
-    // beyond half a pitch of their rest places are paired with the
-    // predictions, in at most [`PAIR_ROUNDS`] rounds (each round's pairs
-    // predict the next).
+    // Each searched marker is the lost rest marker's whose expected place
+    // is nearest, within half a pitch (nearest pairs first, each once): its
+    // rest place moved by its followed neighbours' median displacement
+    // ([`predicted`]; the rest place with fewer than two). From rest places
+    // alone, a press's ring of pins pushed outwards paired each with the
+    // next rest marker out, one pin along (on the renderer's seed 2, 10-18 %
+    // of the pins a press moved were on another pin; BENCHMARKS.md, session
+    // 30). Then the ones a press moved further: the searched markers beyond
+    // half a pitch of their rest places are paired with the predictions, in
+    // at most [`PAIR_ROUNDS`] rounds (each round's pairs predict the next).
     let mut lost = vec![true; near.len()];
     for k in list.iter().filter_map(|m| m.followed_from) {
         if let Some(l) = lost.get_mut(k) {
@@ -1616,7 +1619,12 @@ fn search_around(
     };
     let reach_px = 0.5 * pitch_px;
     let lost_ids: Vec<usize> = (0..near.len()).filter(|&k| lost[k]).collect();
-    let lost_at: Vec<PointPx> = lost_ids.iter().map(|&k| near[k]).collect();
+    let neighbours = rest.neighbours_or_new(pitch_px);
+    let followed = displacements(near, list.iter());
+    let lost_at: Vec<PointPx> = lost_ids
+        .iter()
+        .map(|&k| predicted(near, &followed, neighbours.of(k), k))
+        .collect();
     for (_, j, k) in nearest_pairs(&searched, &lost_at, &lost_ids, reach_px, fw, fh) {
         if lost[k] && searched[j].followed_from.is_none() {
             pair(&mut searched, &mut lost, k, j);
@@ -1624,7 +1632,6 @@ fn search_around(
     }
     if lost.iter().any(|&l| l) && searched.iter().any(|m| m.followed_from.is_none()) {
         let mut displaced = displacements(near, list.iter().chain(&searched));
-        let neighbours = rest.neighbours_or_new(pitch_px);
         let within_px = NEIGHBOUR_PITCH * pitch_px;
         // The searched markers the rest places left unpaired (few: those a
         // press moved furthest), indexed.
@@ -4315,6 +4322,41 @@ mod tests {
             );
             assert_eq!(found.len(), f.markers.len(), "{cat:?}");
         }
+    }
+
+    #[test]
+    fn searched_markers_are_paired_where_their_neighbours_moved_them() {
+        use crate::synth::{self, Category};
+        // The generator's textured scene 121: paired from their rest places
+        // alone, 6 of the searched pins took a neighbour's rest marker (its
+        // rest place was nearer than their own's, the press having moved
+        // them out along its ring); from their neighbours' displacements,
+        // none.
+        let cat = Category::Textured;
+        let params = crate::params::Params::default();
+        let cal = test_fixtures::calibrated(cat, 640, 480, &params);
+        let f = synth::render(&cat.scene(&cat.sensor(640, 480, 5), 121));
+        assert_eq!(f.markers.len(), f.rest_markers.len(), "no dropout");
+        let (found, search) = follow_or_search(
+            &f.image,
+            &cal.detector,
+            &cal.reference(),
+            0.3 * cal.pitch_px,
+            Some(cal.pitch_px),
+        );
+        assert_eq!(search, Search::Local);
+        let d = |a: PointPx, b: PointPx| (a.x - b.x).hypot(a.y - b.y);
+        let wrong: Vec<PointPx> = found
+            .list
+            .iter()
+            .filter_map(|m| {
+                let r = cal.rest_markers[m.followed_from?];
+                let i = (0..f.rest_markers.len())
+                    .min_by(|&a, &b| d(f.rest_markers[a], r).total_cmp(&d(f.rest_markers[b], r)))?;
+                (d(f.markers[i], m.pos) > 2.0).then_some(m.pos)
+            })
+            .collect();
+        assert!(wrong.is_empty(), "markers on another pin: {wrong:?}");
     }
 
     #[test]
