@@ -4282,27 +4282,42 @@ mod tests {
         assert_eq!(found.len() + 1, cal.rest_markers.len());
     }
 
+    /// The generator's `scene` of `cat` (sensor seed 5), its calibration
+    /// and the markers following with the local search finds (a local
+    /// search it must be).
+    fn locally_searched(
+        cat: crate::synth::Category,
+        scene: u64,
+    ) -> (
+        crate::calibrate::Calibration,
+        crate::synth::SynthFrame,
+        Markers,
+    ) {
+        let params = crate::params::Params::default();
+        let cal = test_fixtures::calibrated(cat, 640, 480, &params);
+        let f = crate::synth::render(&cat.scene(&cat.sensor(640, 480, 5), scene));
+        let (found, search) = follow_or_search(
+            &f.image,
+            &cal.detector,
+            &cal.reference(),
+            0.3 * cal.pitch_px,
+            Some(cal.pitch_px),
+        );
+        assert_eq!(search, Search::Local, "{cat:?} scene {scene}");
+        (cal, f, found)
+    }
+
     #[test]
     fn a_pin_squeezed_against_its_neighbour_is_found_once() {
-        use crate::synth::{self, Category};
+        use crate::synth::Category;
         // The generator's two-colour scene 322: a pin the press pushed
         // against its neighbour (433, 220) has no determinant at the
         // binned scale, only at full resolution. Its dim scene 312: an
         // enlarged pin has a second candidate whose centroid lies 2.3 px
         // from the first.
-        let params = crate::params::Params::default();
         for (cat, scene) in [(Category::TwoColour, 322), (Category::Dim, 312)] {
-            let cal = test_fixtures::calibrated(cat, 640, 480, &params);
+            let (cal, f, found) = locally_searched(cat, scene);
             assert_eq!(cal.detector.bin, 2, "{cat:?}: the binned scale is the case");
-            let f = synth::render(&cat.scene(&cat.sensor(640, 480, 5), scene));
-            let (found, search) = follow_or_search(
-                &f.image,
-                &cal.detector,
-                &cal.reference(),
-                0.3 * cal.pitch_px,
-                Some(cal.pitch_px),
-            );
-            assert_eq!(search, Search::Local, "{cat:?}");
             let found = found.positions();
             let near = |p: PointPx, list: &[PointPx], px: f64| {
                 list.iter().any(|q| (q.x - p.x).hypot(q.y - p.y) < px)
@@ -4326,25 +4341,14 @@ mod tests {
 
     #[test]
     fn searched_markers_are_paired_where_their_neighbours_moved_them() {
-        use crate::synth::{self, Category};
+        use crate::synth::Category;
         // The generator's textured scene 121: paired from their rest places
         // alone, 6 of the searched pins took a neighbour's rest marker (its
         // rest place was nearer than their own's, the press having moved
         // them out along its ring); from their neighbours' displacements,
         // none.
-        let cat = Category::Textured;
-        let params = crate::params::Params::default();
-        let cal = test_fixtures::calibrated(cat, 640, 480, &params);
-        let f = synth::render(&cat.scene(&cat.sensor(640, 480, 5), 121));
+        let (cal, f, found) = locally_searched(Category::Textured, 121);
         assert_eq!(f.markers.len(), f.rest_markers.len(), "no dropout");
-        let (found, search) = follow_or_search(
-            &f.image,
-            &cal.detector,
-            &cal.reference(),
-            0.3 * cal.pitch_px,
-            Some(cal.pitch_px),
-        );
-        assert_eq!(search, Search::Local);
         let d = |a: PointPx, b: PointPx| (a.x - b.x).hypot(a.y - b.y);
         let wrong: Vec<PointPx> = found
             .list
