@@ -1631,7 +1631,10 @@ fn search_around(
         }
     }
     if lost.iter().any(|&l| l) && searched.iter().any(|m| m.followed_from.is_none()) {
-        let mut displaced = displacements(near, list.iter().chain(&searched));
+        // The followed markers' displacements, and the searched ones'
+        // paired so far.
+        let mut displaced = followed;
+        add_displacements(&mut displaced, near, searched.iter());
         let within_px = NEIGHBOUR_PITCH * pitch_px;
         // The searched markers the rest places left unpaired (few: those a
         // press moved furthest), indexed.
@@ -1827,12 +1830,25 @@ fn displacements<'a>(
     markers: impl Iterator<Item = &'a Marker>,
 ) -> Vec<Option<PointPx>> {
     let mut displaced = vec![None; near.len()];
+    add_displacements(&mut displaced, near, markers);
+    displaced
+}
+
+/// [`displacements`] of `markers` written over `displaced` (one slot per
+/// rest marker of `near`).
+fn add_displacements<'a>(
+    displaced: &mut [Option<PointPx>],
+    near: &[PointPx],
+    markers: impl Iterator<Item = &'a Marker>,
+) {
     for m in markers {
-        if let Some(k) = m.followed_from.filter(|&k| k < near.len()) {
+        if let Some(k) = m
+            .followed_from
+            .filter(|&k| k < near.len().min(displaced.len()))
+        {
             displaced[k] = Some(PointPx::new(m.pos.x - near[k].x, m.pos.y - near[k].y));
         }
     }
-    displaced
 }
 
 /// Pins a press squeezed into one clipped ridge that no split told apart
