@@ -59,12 +59,6 @@ def kde(xy: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
     return ey.T @ ex  # (ny, nx)
 
 
-def positions(sensor, contact) -> tuple[np.ndarray, np.ndarray | None]:
-    """The true centres of the pins inside the image, and the truth centre."""
-    xy, _, _, _, truth = R.pins(sensor, contact)
-    return xy[R.in_frame(xy)], truth
-
-
 def centre(
     ratio: np.ndarray, mask: np.ndarray, gx: np.ndarray, gy: np.ndarray, area: np.ndarray | float = 1.0
 ) -> np.ndarray | None:
@@ -107,6 +101,16 @@ def dexitac_centres(dexitac: str, frames: Path, cat: str, fields: Path) -> dict[
         return {r["frame"]: (float(r["cx"]), float(r["cy"])) for r in csv.DictReader(f)}
 
 
+def scored(c: np.ndarray, truth: np.ndarray, err: list[float], radial: list[float]) -> None:
+    """Appends centre ``c``'s error against ``truth`` and its radial part
+    (from the image centre; negative: towards it)."""
+    mid = np.array([R.W, R.H]) / 2
+    e = c - truth
+    out = (truth - mid) / max(float(np.linalg.norm(truth - mid)), 1e-9)
+    err.append(float(np.hypot(*e)))
+    radial.append(float(e @ out))
+
+
 def stats(err: list[float], radial: list[float]) -> str:
     if not err:
         return "– | – | –"
@@ -138,14 +142,14 @@ def main() -> int:
     print("|---" * (head.count("|") - 1) + "|")
     for cat in a.categories:
         sensor = R.sensor_of(cat, a.seed)
-        rest_xy, _ = positions(sensor, None)
-        rest = kde(rest_xy, gx, gy)
+        # Every pin at rest (the fields), and those inside the image (the
+        # density here).
+        all_rest = R.pins(sensor, None)[0]
+        rest = kde(all_rest[R.in_frame(all_rest)], gx, gy)
         mask = rest >= MASK_FRACTION * np.quantile(rest[rest > 0], 0.9)
-        mid = np.array([R.W, R.H]) / 2
         err, radial, n = [], [], 0
         truths: dict[str, np.ndarray | None] = {}
         tmp = tempfile.TemporaryDirectory() if a.dexitac else None
-        all_rest = R.pins(sensor, None)[0]
         for i, _, contact in R.frame_contacts(cat, sensor, a.seed, a.frames_per_category):
             all_xy, _, _, _, truth = R.pins(sensor, contact)
             if tmp is not None:
@@ -156,12 +160,8 @@ def main() -> int:
             n += 1
             xy = all_xy[R.in_frame(all_xy)]
             c = centre(kde(xy, gx, gy) / np.maximum(rest, 1e-12), mask, gx, gy, rest if a.area_weights else 1.0)
-            if c is None:
-                continue
-            e = c - truth
-            out = (truth - mid) / max(float(np.linalg.norm(truth - mid)), 1e-9)
-            err.append(float(np.hypot(*e)))
-            radial.append(float(e @ out))
+            if c is not None:
+                scored(c, truth, err, radial)
         row = f"| {cat} | {n} | {len(err)} | {stats(err, radial)} |"
         if tmp is not None:
             got = dexitac_centres(a.dexitac, a.frames, cat, Path(tmp.name))
@@ -171,12 +171,8 @@ def main() -> int:
                 if truth is None:
                     false += int(math.isfinite(cx))
                     continue
-                if not math.isfinite(cx):
-                    continue
-                e = np.array([cx, cy]) - truth
-                out = (truth - mid) / max(float(np.linalg.norm(truth - mid)), 1e-9)
-                d_err.append(float(np.hypot(*e)))
-                d_radial.append(float(e @ out))
+                if math.isfinite(cx):
+                    scored(np.array([cx, cy]), truth, d_err, d_radial)
             row += f" {len(d_err)} | {stats(d_err, d_radial)} | {false} |"
             tmp.cleanup()
         print(row)
