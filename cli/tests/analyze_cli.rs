@@ -589,32 +589,31 @@ fn field_in_runs_the_contact_stages_on_given_markers() {
     let idle_row = rows.iter().find(|r| r.0 == "idle").unwrap();
     assert!(idle_row.1.is_nan(), "false contact on the true idle field");
     // What --field-out writes, --field-in reads (a lost marker's x, y empty).
-    let (own, own_field) = (root.join("own.csv"), root.join("own"));
-    let r = run(&[
-        "analyze",
-        "--rest",
-        rest.to_str().unwrap(),
-        "--out",
-        own.to_str().unwrap(),
-        "--field-out",
-        own_field.to_str().unwrap(),
-        frames.join("press_0.png").to_str().unwrap(),
-        frames.join("idle.png").to_str().unwrap(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
-    let back = root.join("back.csv");
-    let r = run(&[
-        "analyze",
-        "--rest",
-        rest.to_str().unwrap(),
-        "--out",
-        back.to_str().unwrap(),
-        "--field-in",
-        own_field.to_str().unwrap(),
-        frames.join("press_0.png").to_str().unwrap(),
-        frames.join("idle.png").to_str().unwrap(),
-    ]);
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let (own, own_field, back) = (
+        root.join("own.csv"),
+        root.join("own"),
+        root.join("back.csv"),
+    );
+    let two_frames = |out: &Path, flag: &str| {
+        let r = run(&[
+            "analyze",
+            "--rest",
+            rest.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            flag,
+            own_field.to_str().unwrap(),
+            frames.join("press_0.png").to_str().unwrap(),
+            frames.join("idle.png").to_str().unwrap(),
+        ]);
+        assert!(
+            r.status.success(),
+            "{flag}: {}",
+            String::from_utf8_lossy(&r.stderr)
+        );
+    };
+    two_frames(&own, "--field-out");
+    two_frames(&back, "--field-in");
     let ((_, a), (_, b)) = (read_csv(&own), read_csv(&back));
     assert_eq!(a.len(), 2);
     for (x, y) in a.iter().zip(&b) {
