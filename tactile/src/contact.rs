@@ -65,8 +65,9 @@ use crate::PointPx;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Region {
     /// The region's centre, working px: under the relative rule its
-    /// centroid on the skin with capped depth weights ([`DENT_WEIGHT_CAP`]);
-    /// under the paper's absolute rule the sub-pixel argmin of the score
+    /// centroid on the skin with capped depth weights ([`DENT_WEIGHT_CAP`],
+    /// unless the mask cuts it); otherwise, and under the paper's absolute
+    /// rule, the sub-pixel argmin of the score
     /// over it, or for a region wider than [`CENTROID_RADIUS_H`] kernel
     /// widths, or one that encloses skin, its depth-weighted centroid; for
     /// a ring ([`RING_SHARE`]) the centroid of its disc.
@@ -387,12 +388,25 @@ pub fn segment_supported(
         }
         mean.mean()
     };
-    // The relative rule: every region on its centroid, the weights capped
-    // ([`DENT_WEIGHT_CAP`]). The paper's absolute rule: a region wider than
-    // [`CENTROID_RADIUS_H`] kernel widths, or one that encloses skin, on its
-    // depth-weighted centroid; a narrower one on its lowest point.
+    // The relative rule: a region the mask does not cut on its centroid,
+    // the weights capped ([`DENT_WEIGHT_CAP`]). Otherwise, and under the
+    // paper's absolute rule: a region wider than [`CENTROID_RADIUS_H`]
+    // kernel widths, or one that encloses skin, on its depth-weighted
+    // centroid; a narrower one on its lowest point.
     let wide = enclosed_cells > 0 || radius_cells > CENTROID_RADIUS_H * params_reach_cells(map);
-    let cap = if relative {
+    let on_mask = |(x, y): (usize, usize)| x < g.nx && y < g.ny && mask[y * g.nx + x];
+    let cut = || {
+        best_cells.iter().any(|&(i, j)| {
+            let sides = [
+                (i.wrapping_sub(1), j),
+                (i + 1, j),
+                (i, j.wrapping_sub(1)),
+                (i, j + 1),
+            ];
+            !sides.into_iter().all(on_mask)
+        })
+    };
+    let cap = if relative && !cut() {
         Some(DENT_WEIGHT_CAP * (extent - depth))
     } else {
         wide.then_some(f32::INFINITY)
@@ -540,16 +554,24 @@ pub const CENTROID_RADIUS_H: f64 = 1.5;
 /// this fraction of the region's own depth (extent minus its lowest score),
 /// and by its [`rim_trust`]. The dent's walls place it, where the score
 /// falls steeply, not its single lowest cell nor its flat, noisy bottom:
-/// a sheared or tilted press tilts that bottom by a few per cent, and a
-/// lowest point or a depth-weighted centroid slides along the tilt. On
-/// the other renderer's seeds 1-3 (BENCHMARKS.md, session 31), against
-/// the lowest point for regions up to 1.5 kernel widths and the uncapped
-/// centroid beyond: median / p95 px nominal 0.54 / 4.15 -> 0.43 / 3.98,
-/// harsh light 0.89 / 3.38 -> 0.75 / 3.31, blur 0.69 / 3.58 -> 0.59 / 3.55,
-/// large 0.97 / 3.46 -> 0.69 / 2.75, two colours 0.82 / 3.50 -> 0.68 /
-/// 3.50; the flat skin 1.92 -> 2.04 and the rim 2.18 -> 2.29 (their error
-/// is the press's parallax and the clamp, the same on the renderer's true
-/// pins). At 0.3 the nominal median was 0.58 px, at 0.7 0.44 px.
+/// a tilted or sheared press tilts that bottom by a few per cent, and a
+/// lowest point or a depth-weighted centroid slides along the tilt.
+///
+/// A region the sensing mask cuts (a cell of it beside one off the mask or
+/// the map) has no wall on that side, and its centroid moves away from the
+/// cut: it is centred as under the absolute rule ([`CENTROID_RADIUS_H`]).
+///
+/// Measured on the other renderer's seeds 1-3 (BENCHMARKS.md, session 31),
+/// against the lowest point for regions up to 1.5 kernel widths and the
+/// uncapped centroid beyond, median / p95 px: nominal 0.54 / 4.15 -> 0.43 /
+/// 3.98, harsh light 0.89 / 3.38 -> 0.75 / 3.31, blur 0.69 / 3.58 -> 0.59 /
+/// 3.55, large 0.97 / 3.46 -> 0.69 / 2.75, two colours 0.82 / 3.50 ->
+/// 0.68 / 3.50; the flat skin 1.92 -> 2.04 (its error is the pressed pins'
+/// parallax, the same on the renderer's true pins). The rim: 2.18 / 5.67
+/// px as before (2.29 / 5.32 with cut regions on their capped centroid
+/// too); on the project's own generator's edge scene the rule for cut
+/// regions keeps the p95 at 2.31 px (2.89 without). At 0.3 the nominal
+/// median was 0.58 px, at 0.7 0.44 px.
 pub const DENT_WEIGHT_CAP: f32 = 0.5;
 
 /// Upper bound of the quadratic-fit window, grid cells (a kernel width h of
@@ -1274,6 +1296,26 @@ mod tests {
         }
         let r = segment_flat(&map, &rest, &mask);
         assert!(r.is_none_or(|r| r.enclosed_cells == 0), "{r:?}");
+    }
+
+    #[test]
+    fn a_dent_the_mask_cuts_is_centred_on_its_lowest_point() {
+        // A bowl 6 cells in radius around (11, 20), the mask ending at
+        // x = 10: the region is the bowl's right part, whose centroid lies
+        // right of the bowl's middle; its lowest point does not move.
+        let v = values_around(40, 40, (11.0, 20.0), |dx, dy| {
+            (0.3 + 0.1 * dx.hypot(dy)).min(1.0) as f32
+        });
+        let (map, rest) = maps(v, 40, 40);
+        let cut: Vec<bool> = (0..1600).map(|k| k % 40 >= 10).collect();
+        for mask in [&cut[..], &[true; 1600][..]] {
+            let r = segment_flat(&map, &rest, mask).unwrap();
+            assert!(
+                (r.centre.x - 11.0).abs() < 0.5 && (r.centre.y - 20.0).abs() < 0.5,
+                "{:?}",
+                r.centre
+            );
+        }
     }
 
     #[test]
