@@ -67,7 +67,8 @@ pub struct Calibration {
     pub rest_density: DensityMap,
     /// Sensing-area mask on the same grid (row-major).
     pub mask: Vec<bool>,
-    /// Median of the rest density over the mask, markers per mm^2
+    /// Median of the rest density on the skin over the mask (the density
+    /// times the surface's foreshortening), markers per mm^2
     /// ([`contact::rim_trust`]).
     pub rest_median_per_mm2: f32,
     /// The skin's shape (working px): the tracked contact centre is found
@@ -756,15 +757,27 @@ fn reference(
             *m &= area.contains(p);
         }
     }
-    let inside: Vec<f32> = rest_density
+    let median = skin_median(&rest_density, &mask, &detector.surface);
+    (rest_density, mask, median)
+}
+
+/// The median over `mask` of `density` on the skin: a dome's image density
+/// times its foreshortening there ([`Surface::foreshortening`]), markers per
+/// mm^2.
+fn skin_median(density: &DensityMap, mask: &[bool], surface: &Surface) -> f32 {
+    let grid = density.grid;
+    let inside: Vec<f32> = density
         .values_per_mm2
         .iter()
-        .zip(&mask)
-        .filter(|&(v, &m)| m && v.is_finite())
-        .map(|(&v, _)| v)
+        .zip(mask)
+        .enumerate()
+        .filter(|&(_, (v, &m))| m && v.is_finite())
+        .map(|(k, (&v, _))| {
+            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
+            v * surface.foreshortening(p) as f32
+        })
         .collect();
-    let median = markers::percentile(inside, 0.5);
-    (rest_density, mask, median)
+    markers::percentile(inside, 0.5)
 }
 
 /// The bounding box of the rest markers grown by a pitch, the marker size and
@@ -1105,6 +1118,66 @@ mod tests {
         assert!(
             x0 > 0 && x1 < 640 && y0 < 30 && y1 > 450,
             "{x0} {y0} {x1} {y1}"
+        );
+    }
+
+    #[test]
+    fn a_domes_rest_density_is_trusted_across_its_skin() {
+        // Markers evenly on a dome's skin (rings 12 px apart along it, to
+        // 60 degrees from the apex), seen along its axis: the image packs
+        // them tighter towards the rim, and per image pixel the apex holds
+        // fewer than the median, which is no fall-off of the lattice. On
+        // the skin the density is even: the rim's weighting
+        // ([`contact::rim_trust`]) trusts the cells within 80 % of the
+        // dome's image radius alike, where in the image it would not.
+        let (r_px, pitch_px) = (200.0, 12.0);
+        let dome = crate::surface::Dome {
+            centre: PointPx::new(320.0, 240.0),
+            radius_px: r_px,
+        };
+        let mut rest = vec![dome.centre];
+        for i in 1..=((60f64.to_radians() * r_px / pitch_px) as usize) {
+            let theta = i as f64 * pitch_px / r_px;
+            let n = (std::f64::consts::TAU * r_px * theta.sin() / pitch_px).round() as usize;
+            for k in 0..n {
+                let phi = std::f64::consts::TAU * (k as f64 + 0.5 * (i % 2) as f64) / n as f64;
+                let rho = r_px * theta.sin();
+                rest.push(PointPx::new(
+                    320.0 + rho * phi.cos(),
+                    240.0 + rho * phi.sin(),
+                ));
+            }
+        }
+        let setup = DensitySetup {
+            width: 640,
+            height: 480,
+            h_px: 15.0,
+            mm_per_px: 0.1,
+            mode: crate::params::DensityMode::Fast,
+            step_px: 4,
+            truncate_sigmas: 3.0,
+        };
+        let density = density::estimate(&rest, &setup, None);
+        let mask = sensing_mask(&density);
+        let g = density.grid;
+        let surface = Surface::Dome(dome);
+        let trusted_share = |surface: &Surface| {
+            let median = skin_median(&density, &mask, surface);
+            let trust: Vec<f64> = (0..g.nx * g.ny)
+                .filter_map(|k| {
+                    let p = g.point((k % g.nx) as f64, (k / g.nx) as f64);
+                    let inner =
+                        (p.x - 320.0).hypot(p.y - 240.0) < 0.8 * r_px * 60f64.to_radians().sin();
+                    let on_skin = density.values_per_mm2[k] * surface.foreshortening(p) as f32;
+                    (mask[k] && inner).then(|| contact::rim_trust(on_skin, median))
+                })
+                .collect();
+            trust.iter().filter(|&&t| t >= 0.9).count() as f64 / trust.len() as f64
+        };
+        let (skin, image) = (trusted_share(&surface), trusted_share(&Surface::Flat));
+        assert!(
+            skin > 0.95 && image < 0.7,
+            "on the skin {skin:.3}, in the image {image:.3}"
         );
     }
 

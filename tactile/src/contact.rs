@@ -94,9 +94,10 @@ pub struct DensityReference<'a> {
     /// The skin's shape: a wide region's centroid is taken on it
     /// ([`SurfaceMean`]).
     pub surface: &'a Surface,
-    /// Median rest density over the mask, markers per mm^2: a wide region's
-    /// cells count less where the rest density falls below it
-    /// ([`rim_trust`]). 0 turns that off.
+    /// Median rest density on the skin over the mask (the density times
+    /// the skin's foreshortening, [`Surface::foreshortening`]), markers per
+    /// mm^2: a region's cells count less where their rest density on the
+    /// skin falls below it ([`rim_trust`]). 0 turns that off.
     pub rest_median_per_mm2: f32,
 }
 
@@ -112,14 +113,25 @@ impl<'a> DensityReference<'a> {
     }
 }
 
-/// Weight of a cell in a wide region's centroid by its rest density `rest`
-/// against the median `median`: 1 at or above the median, falling linearly
-/// to 0 at half of it. Where the marker lattice ends (the rim, the fall-off
-/// of the kernel beyond the last ring) the rest density drops steeply, and
-/// its ratio to the frame's density swings with small shifts of the outer
-/// markers, which a press near the rim crowds and merges. Measured on the
-/// other renderer's rim contacts (BENCHMARKS.md, session 15): without it the
-/// centroid on the dome ran outwards, 3.63 px median against 2.94 with it.
+/// Weight of a cell in a region's centroid by its rest density on the skin
+/// `rest` against the median `median`: 1 at or above the median, falling
+/// linearly to 0 at half of it. Where the marker lattice ends (the rim, the
+/// fall-off of the kernel beyond the last ring) the rest density drops
+/// steeply, and its ratio to the frame's density swings with small shifts of
+/// the outer markers, which a press near the rim crowds and merges. Measured
+/// on the other renderer's rim contacts (BENCHMARKS.md, session 15): without
+/// it the centroid on the dome ran outwards, 3.63 px median against 2.94
+/// with it.
+///
+/// The density compared is the one on the skin (the image density times the
+/// foreshortening `cos(theta)`): a dome's image packs more markers per pixel
+/// towards its rim, and its apex fewer than the median, which is no fall-off.
+/// For markers evenly on a dome to 60 degrees, the image density fully
+/// trusts only 56 % of the cells within 80 % of its radius, the density on
+/// the skin all of them (`calibrate`'s test
+/// `a_domes_rest_density_is_trusted_across_its_skin`): a press's cells
+/// nearer the rim weighed more, and its centroid moved outwards
+/// (BENCHMARKS.md, session 31).
 pub fn rim_trust(rest: f32, median: f32) -> f64 {
     if !(median > 0.0 && median.is_finite()) {
         return 1.0;
@@ -381,10 +393,11 @@ pub fn segment_supported(
             } else {
                 (extent - score(ci, cj)).min(cap) as f64
             };
-            mean.add(
-                g.point(ci as f64, cj as f64),
-                weight * rim_trust(rest_k, rest_median_per_mm2),
-            );
+            // Each cell weighs the skin it covers (1 / cos on a dome) and
+            // the trust in its rest density there.
+            mean.add_with(g.point(ci as f64, cj as f64), |cos| {
+                weight * rim_trust(rest_k * cos as f32, rest_median_per_mm2) / cos
+            });
         }
         mean.mean()
     };
@@ -1638,6 +1651,54 @@ mod tests {
             0.1
         )
         .is_none());
+    }
+
+    #[test]
+    fn a_dent_on_a_dome_is_centred_on_the_skin_it_covers() {
+        // A dome of radius 60 px seen along its axis at (40, 40); its skin
+        // evenly covered with markers, so the image density is 1 / cos
+        // (the skin's median 1). A dent symmetric on the skin, 10 px in
+        // chord radius, around the skin point seen at (90, 40), 56 degrees
+        // from the apex. The image squeezes its outer half: each cell
+        // weighted alike, even on the sphere, its mean lies 0.21 px
+        // inwards; each weighted by the skin it covers, 0.006 px off.
+        let (w, h, r_px) = (120usize, 80usize, 60.0);
+        let dome = crate::surface::Dome {
+            centre: PointPx::new(40.0, 40.0),
+            radius_px: r_px,
+        };
+        let surface = Surface::Dome(dome);
+        let lift = |x: f64, y: f64| {
+            let (a, b) = ((x - 40.0) / r_px, (y - 40.0) / r_px);
+            [a, b, (1.0 - a * a - b * b).max(0.0).sqrt()]
+        };
+        let c = lift(90.0, 40.0);
+        let (mut rest_v, mut frame) = (vec![0f32; w * h], vec![0f32; w * h]);
+        for k in 0..w * h {
+            let q = lift((k % w) as f64, (k / w) as f64);
+            let chord = r_px * (0..3).map(|i| (q[i] - c[i]).powi(2)).sum::<f64>().sqrt();
+            let dent = 1.0 - 0.5 * (1.0 - (chord / 10.0).powi(2)).max(0.0);
+            rest_v[k] = (1.0 / q[2]) as f32;
+            frame[k] = (dent / q[2]) as f32;
+        }
+        let (map, rest) = maps(frame, w, h);
+        let rest = DensityMap {
+            values_per_mm2: rest_v,
+            ..rest
+        };
+        let mask = vec![true; w * h];
+        let reference = DensityReference {
+            rest: &rest,
+            mask: &mask,
+            surface: &surface,
+            rest_median_per_mm2: 1.0,
+        };
+        let r = segment(&map, &reference, &loose(), 1.0).unwrap();
+        assert!(
+            (r.centre.x - 90.0).abs() < 0.05 && (r.centre.y - 40.0).abs() < 0.05,
+            "{:?}",
+            r.centre
+        );
     }
 
     #[test]

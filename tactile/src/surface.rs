@@ -181,13 +181,28 @@ impl SurfaceMean {
     /// Adds image point `p` with weight `w` (ignored unless finite and
     /// positive).
     pub fn add(&mut self, p: PointPx, w: f64) {
-        if !(w > 0.0 && w.is_finite() && p.is_finite()) {
+        self.add_with(p, |_| w);
+    }
+
+    /// Adds image point `p` with the weight `weight(cos)` gives for the
+    /// skin's foreshortening `cos` there ([`Surface::foreshortening`]; 1 on
+    /// a flat skin), the point lifted once (a weight ignored unless finite
+    /// and positive).
+    pub fn add_with(&mut self, p: PointPx, weight: impl FnOnce(f64) -> f64) {
+        if !p.is_finite() {
             return;
         }
-        let [x, y, z] = match &self.surface {
-            Surface::Flat => [p.x, p.y, 0.0],
-            Surface::Dome(d) => d.lift(p),
+        let ([x, y, z], cos) = match &self.surface {
+            Surface::Flat => ([p.x, p.y, 0.0], 1.0),
+            Surface::Dome(d) => {
+                let q = d.lift(p);
+                (q, q[2])
+            }
         };
+        let w = weight(cos);
+        if !(w > 0.0 && w.is_finite()) {
+            return;
+        }
         for (s, v) in self.sum.iter_mut().zip([x, y, z, 1.0]) {
             *s += w * v;
         }
