@@ -181,7 +181,9 @@ impl SurfaceMean {
     /// Adds image point `p` with weight `w` (ignored unless finite and
     /// positive).
     pub fn add(&mut self, p: PointPx, w: f64) {
-        self.add_with(p, |_| w);
+        if w > 0.0 && w.is_finite() {
+            self.add_with(p, |_| w);
+        }
     }
 
     /// Adds image point `p` with the weight `weight(cos)` gives for the
