@@ -271,13 +271,7 @@ pub fn segment_supported(
             if s < low.1 {
                 low = ((ci, cj), s);
             }
-            let neighbours = [
-                (ci.wrapping_sub(1), cj),
-                (ci + 1, cj),
-                (ci, cj.wrapping_sub(1)),
-                (ci, cj + 1),
-            ];
-            for (ni, nj) in neighbours {
+            for (ni, nj) in four_neighbours(ci, cj) {
                 if ni < g.nx && nj < g.ny && usable(ni, nj) {
                     let nk = nj * g.nx + ni;
                     if !seen[nk] && below(ni, nj, extent) {
@@ -409,15 +403,9 @@ pub fn segment_supported(
     let wide = enclosed_cells > 0 || radius_cells > CENTROID_RADIUS_H * params_reach_cells(map);
     let on_mask = |(x, y): (usize, usize)| x < g.nx && y < g.ny && mask[y * g.nx + x];
     let cut = || {
-        best_cells.iter().any(|&(i, j)| {
-            let sides = [
-                (i.wrapping_sub(1), j),
-                (i + 1, j),
-                (i, j.wrapping_sub(1)),
-                (i, j + 1),
-            ];
-            !sides.into_iter().all(on_mask)
-        })
+        best_cells
+            .iter()
+            .any(|&(i, j)| !four_neighbours(i, j).into_iter().all(on_mask))
     };
     let cap = if relative && !cut() {
         Some(DENT_WEIGHT_CAP * (extent - depth))
@@ -466,6 +454,17 @@ pub fn segment_supported(
         area_mm2,
         depth,
     })
+}
+
+/// The 4-connected neighbours of cell `(i, j)`; one beyond the grid's first
+/// row or column wraps to `usize::MAX` (beyond any grid).
+fn four_neighbours(i: usize, j: usize) -> [(usize, usize); 4] {
+    [
+        (i.wrapping_sub(1), j),
+        (i + 1, j),
+        (i, j.wrapping_sub(1)),
+        (i, j + 1),
+    ]
 }
 
 /// The cells a region of `cells` (4-connected) encloses: inside its
