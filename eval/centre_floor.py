@@ -31,6 +31,14 @@ dome all stay in it. Prints, per category, the median and 95th percentile
 of the error and the median of its radial component (from the image
 centre; negative: towards the centre). ``--area-weights`` also weights
 each cell by its rest density, i.e. by the skin area it covers.
+
+Two options take one physical effect out of the true pins, to measure its
+share of the error:
+
+- ``--no-parallax``: each pressed pin is seen where it would be at its rest
+  depth (its place on the skin unchanged, not nearer the camera);
+- ``--no-shear``: a sheared contact is pressed where its indenter ends up,
+  without the tangential shear (the truth centre stays where it was).
 """
 
 from __future__ import annotations
@@ -72,6 +80,20 @@ def centre(
     region = labels == (1 + int(np.argmax(seeds)))
     w = np.where(region, EXTENT - ratio, 0.0) * area
     return np.array([(w.sum(0) * gx).sum(), (w.sum(1) * gy).sum()]) / w.sum()
+
+
+def pressed_pins(sensor, contact: dict | None, parallax: bool = True, shear: bool = True):
+    """The pins' image places under ``contact`` and the truth centre
+    (``render.pins``), optionally without the pressed pins' parallax or
+    without the contact's shear (see the module doc)."""
+    if contact is not None and not shear:
+        moved = sensor.rim_factor(contact["c"][None, :])[0] * contact["shear"]
+        contact = dict(contact, c=contact["c"] + moved, shear=np.zeros(2))
+    if parallax:
+        xy, _, _, _, truth = R.pins(sensor, contact)
+        return xy, truth
+    _, q2, _, _, _, truth = R.deform(sensor, contact)
+    return sensor.project(sensor.to3d(q2, 0.0)), truth
 
 
 def write_field(path: Path, rest_xy: np.ndarray, xy: np.ndarray) -> None:
@@ -128,6 +150,8 @@ def main() -> int:
         help="weight each cell also by its rest density (the skin area its pixels cover, pins being "
         "evenly spread on the skin): the centroid on the skin rather than in the image",
     )
+    ap.add_argument("--no-parallax", action="store_true", help="pressed pins seen at their rest depth")
+    ap.add_argument("--no-shear", action="store_true", help="sheared contacts pressed without the shear")
     ap.add_argument("--dexitac", help="dexitac binary: also run its own stages on the true places")
     ap.add_argument("--frames", type=Path, help="render.py's output for --dexitac (same seed and frame count)")
     a = ap.parse_args()
@@ -151,7 +175,7 @@ def main() -> int:
         truths: dict[str, np.ndarray | None] = {}
         tmp = tempfile.TemporaryDirectory() if a.dexitac else None
         for i, _, contact in R.frame_contacts(cat, sensor, a.seed, a.frames_per_category):
-            all_xy, _, _, _, truth = R.pins(sensor, contact)
+            all_xy, truth = pressed_pins(sensor, contact, not a.no_parallax, not a.no_shear)
             if tmp is not None:
                 write_field(Path(tmp.name) / f"{i:04d}.csv", all_rest, all_xy)
             truths[f"{i:04d}"] = truth
