@@ -39,6 +39,14 @@ share of the error:
   depth (its place on the skin unchanged, not nearer the camera);
 - ``--no-shear``: a sheared contact is pressed where its indenter ends up,
   without the tangential shear (the truth centre stays where it was).
+
+``--on-skin`` takes the first columns' density, region and centroid on the
+skin instead of in the image: in the renderer's skin coordinates (mm), the
+pins' image places mapped there through the rest pins (as a calibration
+would map them; a pressed pin's parallax stays in its image place), with
+the kernel and grid step of ``H_PX`` and ``STEP_PX`` at the image's scale
+where the skin faces the camera; the centroid is then seen in the image as
+the rest frame shows it.
 """
 
 from __future__ import annotations
@@ -53,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
+from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import render as R  # noqa: E402
@@ -60,11 +69,37 @@ import render as R  # noqa: E402
 H_PX, STEP_PX, THRESHOLD, EXTENT, MASK_FRACTION = 15.0, 8, 0.80, 0.90, 0.5
 
 
-def kde(xy: np.ndarray, gx: np.ndarray, gy: np.ndarray) -> np.ndarray:
-    """Sum of Gaussians of width H_PX at the grid points (separable)."""
-    ex = np.exp(-((gx[None, :] - xy[:, 0:1]) ** 2) / (2 * H_PX**2))  # (n, nx)
-    ey = np.exp(-((gy[None, :] - xy[:, 1:2]) ** 2) / (2 * H_PX**2))  # (n, ny)
+def kde(xy: np.ndarray, gx: np.ndarray, gy: np.ndarray, h: float = H_PX) -> np.ndarray:
+    """Sum of Gaussians of width ``h`` (H_PX) at the grid points (separable)."""
+    ex = np.exp(-((gx[None, :] - xy[:, 0:1]) ** 2) / (2 * h**2))  # (n, nx)
+    ey = np.exp(-((gy[None, :] - xy[:, 1:2]) ** 2) / (2 * h**2))  # (n, ny)
     return ey.T @ ex  # (ny, nx)
+
+
+class Skin:
+    """The grid and kernel of ``--on-skin`` for ``sensor``, whose pins
+    ``rest_q`` (skin mm) are seen at ``rest_xy`` (image px) at rest."""
+
+    def __init__(self, sensor, rest_xy: np.ndarray, rest_q: np.ndarray):
+        at = sensor.project(sensor.to3d(np.array([[0.0, 0.0], [0.1, 0.0]]), 0.0))
+        px_per_mm = float(np.hypot(*(at[1] - at[0]))) / 0.1
+        self.h, step = H_PX / px_per_mm, STEP_PX / px_per_mm
+        lo, hi = rest_q.min(0) - 3 * self.h, rest_q.max(0) + 3 * self.h
+        self.gx, self.gy = np.arange(lo[0], hi[0], step), np.arange(lo[1], hi[1], step)
+        self.linear = LinearNDInterpolator(rest_xy, rest_q)
+        self.nearest = NearestNDInterpolator(rest_xy, rest_q)
+        self.sensor = sensor
+
+    def density(self, xy: np.ndarray) -> np.ndarray:
+        """The density on the skin of pins seen at ``xy`` (image px)."""
+        q = self.linear(xy)
+        off = ~np.isfinite(q[:, 0])
+        q[off] = self.nearest(xy[off])
+        return kde(q, self.gx, self.gy, self.h)
+
+    def to_image(self, q: np.ndarray) -> np.ndarray:
+        """Skin point ``q`` as the rest frame shows it."""
+        return self.sensor.project(self.sensor.to3d(q[None, :], 0.0))[0]
 
 
 def centre(
@@ -152,6 +187,7 @@ def main() -> int:
     )
     ap.add_argument("--no-parallax", action="store_true", help="pressed pins seen at their rest depth")
     ap.add_argument("--no-shear", action="store_true", help="sheared contacts pressed without the shear")
+    ap.add_argument("--on-skin", action="store_true", help="the first columns' density and centroid on the skin")
     ap.add_argument("--dexitac", help="dexitac binary: also run its own stages on the true places")
     ap.add_argument("--frames", type=Path, help="render.py's output for --dexitac (same seed and frame count)")
     a = ap.parse_args()
@@ -169,7 +205,9 @@ def main() -> int:
         # Every pin at rest (the fields), and those inside the image (the
         # density here).
         all_rest = R.pins(sensor, None)[0]
-        rest = kde(all_rest[R.in_frame(all_rest)], gx, gy)
+        seen = R.in_frame(all_rest)
+        skin = Skin(sensor, all_rest[seen], sensor.q0[seen]) if a.on_skin else None
+        rest = skin.density(all_rest[seen]) if skin else kde(all_rest[seen], gx, gy)
         mask = rest >= MASK_FRACTION * np.quantile(rest[rest > 0], 0.9)
         err, radial, n = [], [], 0
         truths: dict[str, np.ndarray | None] = {}
@@ -183,7 +221,11 @@ def main() -> int:
                 continue
             n += 1
             xy = all_xy[R.in_frame(all_xy)]
-            c = centre(kde(xy, gx, gy) / np.maximum(rest, 1e-12), mask, gx, gy, rest if a.area_weights else 1.0)
+            if skin:
+                c = centre(skin.density(xy) / np.maximum(rest, 1e-12), mask, skin.gx, skin.gy)
+                c = None if c is None else skin.to_image(c)
+            else:
+                c = centre(kde(xy, gx, gy) / np.maximum(rest, 1e-12), mask, gx, gy, rest if a.area_weights else 1.0)
             if c is not None:
                 scored(c, truth, err, radial)
         row = f"| {cat} | {n} | {len(err)} | {stats(err, radial)} |"
