@@ -193,6 +193,8 @@ def main() -> int:
     a = ap.parse_args()
     if (a.dexitac is None) != (a.frames is None):
         ap.error("--dexitac and --frames go together")
+    if a.on_skin and a.area_weights:
+        ap.error("--on-skin takes the centroid on the skin already: no --area-weights with it")
     gx = np.arange(0, R.W, STEP_PX) + (STEP_PX - 1) / 2
     gy = np.arange(0, R.H, STEP_PX) + (STEP_PX - 1) / 2
     head = "| category | contact frames | centred | error median px | p95 px | radial median px |"
