@@ -741,8 +741,8 @@ pub fn rest_gaps(
 
 /// What the rest markers give every frame's density: the rest density, the
 /// sensing mask on its grid (where the rest density is, inside the
-/// detector's area) and the rest density's median over the mask (0 for an
-/// empty mask).
+/// detector's area) and the rest density's median on the skin over the
+/// mask ([`skin_median`]; 0 for an empty mask).
 fn reference(
     rest_markers: &[PointPx],
     density: &DensitySetup,
@@ -753,8 +753,7 @@ fn reference(
     let grid = density.grid();
     if let Some(area) = &detector.area {
         for (k, m) in mask.iter_mut().enumerate() {
-            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
-            *m &= area.contains(p);
+            *m &= area.contains(grid.point_of(k));
         }
     }
     let median = skin_median(&rest_density, &mask, &detector.surface);
@@ -772,10 +771,7 @@ fn skin_median(density: &DensityMap, mask: &[bool], surface: &Surface) -> f32 {
         .zip(mask)
         .enumerate()
         .filter(|&(_, (v, &m))| m && v.is_finite())
-        .map(|(k, (&v, _))| {
-            let p = grid.point((k % grid.nx) as f64, (k / grid.nx) as f64);
-            v * surface.foreshortening(p) as f32
-        })
+        .map(|(k, (&v, _))| v * surface.foreshortening(grid.point_of(k)) as f32)
         .collect();
     markers::percentile(inside, 0.5)
 }
@@ -1165,7 +1161,7 @@ mod tests {
             let median = skin_median(&density, &mask, surface);
             let trust: Vec<f64> = (0..g.nx * g.ny)
                 .filter_map(|k| {
-                    let p = g.point((k % g.nx) as f64, (k / g.nx) as f64);
+                    let p = g.point_of(k);
                     let inner =
                         (p.x - 320.0).hypot(p.y - 240.0) < 0.8 * r_px * 60f64.to_radians().sin();
                     let on_skin = density.values_per_mm2[k] * surface.foreshortening(p) as f32;

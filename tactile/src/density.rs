@@ -53,6 +53,11 @@ impl Grid {
         PointPx::new(self.coord(i), self.coord(j))
     }
 
+    /// Working-frame point of the cell at row-major index `k`.
+    pub fn point_of(&self, k: usize) -> PointPx {
+        self.point((k % self.nx) as f64, (k / self.nx) as f64)
+    }
+
     /// All cells.
     pub fn full(&self) -> CellRect {
         CellRect {

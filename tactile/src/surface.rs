@@ -152,10 +152,13 @@ impl Surface {
 
 /// Weighted mean of image points taken on the skin: on a dome the mean of
 /// the points' unit vectors on the sphere, renormalised and seen again in
-/// the image; on a flat skin the plain weighted mean. Weights are per image
-/// point (no area correction: measured, weighting each point by the skin
-/// area of its pixel, `1 / cos(theta)`, moved the other renderer's centres
-/// further than the sphere alone; BENCHMARKS.md, session 15).
+/// the image; on a flat skin the plain weighted mean. Weights are the
+/// caller's: [`SurfaceMean::add`] takes one per image point as given, and
+/// [`SurfaceMean::add_with`] lets it depend on the foreshortening there (a
+/// contact region weighs each cell by the skin it covers, `1 / cos(theta)`,
+/// times the trust in its rest density on the skin; BENCHMARKS.md, session
+/// 31. In session 15 the area weight alone had moved the other renderer's
+/// centres further than the sphere alone).
 ///
 /// On a dome the image mean of a patch is pulled towards the apex: the image
 /// radius `R sin(theta)` bends over as theta grows, so the outer half of a
