@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """An independent renderer of synthetic TacTip-style frames with truth.
 
-    python eval/render.py --out DIR [--seed N] [--frames-per-category K]
+    python eval/render.py --out DIR [--seed N] [--frames-per-category K] [--no-parallax]
 
 Writes, per category, ``DIR/<category>/rest.png``, ``DIR/<category>/frames/NNNN.png``
 and ``DIR/<category>/truth.csv`` (``frame,cx,cy,n_markers,depth_mm``; ``cx, cy``
@@ -50,7 +50,8 @@ generator. What it models:
   displaced markers. (Pressed tips come nearer the camera, so the dimple
   itself also shifts in the image by parallax: up to ~1 px on the dome,
   camera 5 mm behind the sphere's centre, and up to ~4-10 px on the flat
-  skin far from the optical axis, 28 mm away.)
+  skin far from the optical axis, 28 mm away.) ``--no-parallax`` leaves
+  that out: pressed pins are drawn at their rest depth, the rest unchanged.
 """
 
 from __future__ import annotations
@@ -374,6 +375,12 @@ def deflection(kind: str, delta: float, a: float, ri: float):
     return r, w, slope
 
 
+# ``--no-parallax``: pressed pins are drawn at their rest depth (their place
+# on the skin, tilt and size as pressed), as a renderer without the dimple's
+# depth would show them.
+PARALLAX = True
+
+
 def deform(sensor, contact: dict | None):
     """Deformed pin tips: 3-D positions, tilt, size and brightness factors, and
     the truth centre (image px)."""
@@ -406,7 +413,7 @@ def deform(sensor, contact: dict | None):
     dur = (ur_of(r + h) - ur_of(np.maximum(r - h, 0))) / (r + h - np.maximum(r - h, 0))
     div = dur + ur / np.maximum(r, 0.3)
     q2 = q1 + (g0 * ur)[:, None] * u_dir
-    weff = g0 * w
+    weff = g0 * w if PARALLAX else 0.0 * w
     p3 = sensor.to3d(q2, weff)
     tilt = g0 * tilt
     grow = np.sqrt(np.clip(1 + SIZE_GAIN * g0 * div, 0.6, 1.6))
@@ -639,7 +646,10 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--frames-per-category", type=int, default=24)
     ap.add_argument("--categories", nargs="*", default=CATEGORIES)
+    ap.add_argument("--no-parallax", action="store_true", help="pressed pins drawn at their rest depth (no parallax)")
     a = ap.parse_args()
+    global PARALLAX
+    PARALLAX = not a.no_parallax
     out = Path(a.out)
     t0 = time.time()
     sensors = {
