@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
 """Score ``dexitac analyze`` on the frames of eval/render.py.
 
-    python eval/render_eval.py --dexitac PATH --frames DIR [--out eval/results] [--date TAG]
+    python eval/render_eval.py --dexitac PATH --frames DIR [--out eval/results] [--date TAG] [--config TOML]
 
 For each category ``DIR/<cat>/`` (rest.png, frames/*.png, truth.csv) it runs
 ``PATH analyze -q --rest DIR/<cat>/rest.png --out <tmp>/pred.csv DIR/<cat>/frames/*.png``
-(no config), joins the prediction with the truth on ``frame`` and reports per
+(no config unless ``--config`` gives one for every category), joins the prediction with the truth on ``frame`` and reports per
 category and over all frames:
 
 - frames;
@@ -72,10 +72,10 @@ TABLE_HEAD = [
 ]
 
 
-def run_category(dexitac: str, d: Path) -> tuple[list[dict], float, str]:
-    """``dexitac analyze --rest rest.png`` on a category's frames (eval/run.py's runner)."""
+def run_category(dexitac: str, d: Path, config: Path | None = None) -> tuple[list[dict], float, str]:
+    """``dexitac analyze --rest rest.png [--config CONFIG]`` on a category's frames (eval/run.py's runner)."""
     with tempfile.TemporaryDirectory() as tmp:
-        return run_dexitac(dexitac, d, d / "rest.png", Path(tmp), d.name, None)
+        return run_dexitac(dexitac, d, d / "rest.png", Path(tmp), d.name, config)
 
 
 def score(pairs: list[tuple[dict, dict]]) -> dict:
@@ -139,6 +139,7 @@ def main() -> int:
     ap.add_argument("--frames", required=True, help="eval/render.py's --out")
     ap.add_argument("--out", default="eval/results")
     ap.add_argument("--date", default=dt.date.today().isoformat())
+    ap.add_argument("--config", type=Path, help="a sensor config for every category (default: none)")
     a = ap.parse_args()
     root, out = Path(a.frames), Path(a.out)
     cats = [p.parent.name for p in sorted(root.glob("*/truth.csv"))]
@@ -152,7 +153,8 @@ def main() -> int:
         "",
         f"`{' '.join(sys.argv)}`",
         "",
-        f"Machine: {machine()}. Frames: `{root}`; `dexitac analyze -q --rest <cat>/rest.png`, no config.",
+        f"Machine: {machine()}. Frames: `{root}`; `dexitac analyze -q --rest <cat>/rest.png`, "
+        + (f"config `{a.config}`." if a.config else "no config."),
         "",
         TARGETS,
         "",
@@ -165,7 +167,7 @@ def main() -> int:
     for c in cats:
         d = root / c
         truth = read_csv(d / "truth.csv")
-        rows, wall, note = run_category(a.dexitac, d)
+        rows, wall, note = run_category(a.dexitac, d, a.config)
         if note:
             notes.append(f"- {c}: {note}")
         pred = {r["frame"]: r for r in rows}

@@ -347,6 +347,8 @@ def main() -> None:
     ap.add_argument("--rest-modes", nargs="+", default=["level", "median"], choices=["level", "median"],
                     help="rest frames for sets without rest.png")
     ap.add_argument("--date", default=dt.date.today().isoformat())
+    ap.add_argument("--dexitac-config", type=Path,
+                    help="a sensor config for the 'dexitac default' rows (default: none)")
     ap.add_argument("--tools", nargs="+", default=TOOLS, choices=TOOLS,
                     help="run only these tools (e.g. dexitac after a change, the baselines unchanged)")
     a = ap.parse_args()
@@ -380,7 +382,7 @@ def main() -> None:
             # it can (`--rest-from-frames`); the baselines use the median image.
             own = rest_from_frames and rest_name == "median"
             if "dexitac default" in a.tools:
-                rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "default", None, from_frames=own)
+                rows, wall, note = run_dexitac(exe, set_dir, rest, out_dir, "default", a.dexitac_config, from_frames=own)
                 if own:
                     note = (note + " " if note else "") + "rest: --rest-from-frames"
                 results.append(dict(base, tool="dexitac default", m=metrics(rows, labels, meta, wall), note=note))
@@ -397,7 +399,7 @@ def main() -> None:
             ref = reference_pins(set_dir, meta, rest_name, rest)
             if ref is not None:
                 for tool in a.tools:
-                    pts = rest_markers(exe, tool, s, rest, out_dir, cfg if tool == "dexitac tuned" else None)
+                    pts = rest_markers(exe, tool, s, rest, out_dir, cfg if tool == "dexitac tuned" else a.dexitac_config)
                     positions.append(dict(set=s, rest=rest_name, tool=tool, pins=len(ref),
                                           check=position_check(ref, pts, pitch)))
             print(table([r for r in results if r["set"] == s and r["rest"] == rest_name]), file=sys.stderr)

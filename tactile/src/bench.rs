@@ -700,6 +700,7 @@ pub fn density_difference(steps: &[u32], frames: usize, seed: u64) -> Vec<(u32, 
             mode: DensityMode::Fast,
             step_px: step as usize,
             truncate_sigmas: params.density.truncate_sigmas,
+            skin: None,
         };
         let (mut worst, mut sum, mut n) = (0f64, 0f64, 0usize);
         for m in &scenes {

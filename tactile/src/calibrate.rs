@@ -14,7 +14,7 @@ use crate::contact;
 use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Detector, MarkerError, RimBand};
-use crate::params::Params;
+use crate::params::{DensityKernel, Params};
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
 use crate::PointPx;
@@ -112,6 +112,7 @@ impl Calibration {
             mask: &self.mask,
             surface: &self.surface,
             rest_median_per_mm2: self.rest_median_per_mm2,
+            on_skin: self.density.skin.is_some(),
         }
     }
 
@@ -561,6 +562,10 @@ fn finish(
         mode: params.density.mode,
         step_px: params.density.grid_step_px as usize,
         truncate_sigmas: params.density.truncate_sigmas,
+        skin: match (params.density.kernel, surface) {
+            (DensityKernel::Skin, Surface::Dome(dome)) => Some(dome),
+            _ => None,
+        },
     };
     let (rest_density, mask, rest_median_per_mm2) = reference(&rest_markers, &density, &detector);
     let centroid_radii_px = markers::centroid_radii(&rest_markers, detector.radius_px);
@@ -742,7 +747,8 @@ pub fn rest_gaps(
 /// What the rest markers give every frame's density: the rest density, the
 /// sensing mask on its grid (where the rest density is, inside the
 /// detector's area) and the rest density's median on the skin over the
-/// mask ([`skin_median`]; 0 for an empty mask).
+/// mask ([`skin_median`], or the plain median when the kernel is on the
+/// skin; 0 for an empty mask).
 fn reference(
     rest_markers: &[PointPx],
     density: &DensitySetup,
@@ -756,7 +762,12 @@ fn reference(
             *m &= area.contains(grid.point_of(k));
         }
     }
-    let median = skin_median(&rest_density, &mask, &detector.surface);
+    // A kernel on the skin gave densities on the skin already.
+    let surface = match density.skin {
+        Some(_) => Surface::Flat,
+        None => detector.surface,
+    };
+    let median = skin_median(&rest_density, &mask, &surface);
     (rest_density, mask, median)
 }
 
@@ -1152,6 +1163,7 @@ mod tests {
             mode: crate::params::DensityMode::Fast,
             step_px: 4,
             truncate_sigmas: 3.0,
+            skin: None,
         };
         let density = density::estimate(&rest, &setup, None);
         let mask = sensing_mask(&density);

@@ -99,6 +99,10 @@ pub struct DensityReference<'a> {
     /// mm^2: a region's cells count less where their rest density on the
     /// skin falls below it ([`rim_trust`]). 0 turns that off.
     pub rest_median_per_mm2: f32,
+    /// The densities are per mm^2 of skin already (the kernel on the skin,
+    /// [`crate::params::DensityKernel::Skin`]), not per image mm^2 to be
+    /// taken onto the skin by the foreshortening.
+    pub on_skin: bool,
 }
 
 impl<'a> DensityReference<'a> {
@@ -109,6 +113,7 @@ impl<'a> DensityReference<'a> {
             mask,
             surface: &Surface::Flat,
             rest_median_per_mm2: 0.0,
+            on_skin: false,
         }
     }
 }
@@ -220,6 +225,7 @@ pub fn segment_supported(
         mask,
         surface,
         rest_median_per_mm2,
+        on_skin,
     } = *reference;
     let g = map.grid;
     let roi = map.roi;
@@ -390,7 +396,8 @@ pub fn segment_supported(
             // Each cell weighs the skin it covers (1 / cos on a dome) and
             // the trust in its rest density there.
             mean.add_with(g.point(ci as f64, cj as f64), |cos| {
-                weight * rim_trust(rest_k * cos as f32, rest_median_per_mm2) / cos
+                let rest_on_skin = if on_skin { rest_k } else { rest_k * cos as f32 };
+                weight * rim_trust(rest_on_skin, rest_median_per_mm2) / cos
             });
         }
         mean.mean()
@@ -1451,6 +1458,7 @@ mod tests {
             mode: crate::params::DensityMode::Fast,
             step_px: 8,
             truncate_sigmas: 3.0,
+            skin: None,
         };
         let rest = crate::test_fixtures::hex_points(w, h, pitch);
         let rest_map = crate::density::estimate(&rest, &setup, None);
@@ -1694,6 +1702,7 @@ mod tests {
             mask: &mask,
             surface: &surface,
             rest_median_per_mm2: 1.0,
+            on_skin: false,
         };
         let r = segment(&map, &reference, &loose(), 1.0).unwrap();
         assert!(

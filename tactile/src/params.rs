@@ -236,6 +236,24 @@ pub enum DensityMode {
     Fast,
 }
 
+/// Where the kernel density's Gaussian is isotropic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum DensityKernel {
+    /// In the image (the paper's Eq. 1), whatever the skin's shape.
+    #[default]
+    Image,
+    /// On the skin: on a dome ([`crate::surface::Surface::Dome`]) the
+    /// distance between a sample and a marker is taken between their points
+    /// on the sphere, so the kernel spans the same skin everywhere and a
+    /// dome's foreshortened rim does not pull a dent inwards. The same as
+    /// `image` on a flat skin. Fast mode only. Measured on the other
+    /// renderer (BENCHMARKS.md, session 33): right where the pressed pins
+    /// move along the camera's rays (a camera at the sphere's centre), and
+    /// wrong by the parallax where they do not.
+    Skin,
+}
+
 /// Kernel density parameters (stage 3, Eq. 1).
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -248,6 +266,8 @@ pub struct DensityParams {
     pub grid_step_px: u32,
     /// Kernel truncation radius of the fast path, in units of h (2..=8).
     pub truncate_sigmas: f64,
+    /// Where the kernel is isotropic: in the image (default) or on the skin.
+    pub kernel: DensityKernel,
 }
 
 impl Default for DensityParams {
@@ -259,6 +279,7 @@ impl Default for DensityParams {
             // error of step 4 (median ~0.1 px) at ~12 % less time.
             grid_step_px: 8,
             truncate_sigmas: 3.0,
+            kernel: DensityKernel::Image,
         }
     }
 }
@@ -422,6 +443,12 @@ impl Params {
             (2.0..=8.0).contains(&d.truncate_sigmas),
             "must be in [2, 8]",
         )?;
+        check(
+            "density.kernel",
+            "skin",
+            d.kernel == DensityKernel::Image || d.mode == DensityMode::Fast,
+            "the skin's kernel needs density.mode = \"fast\"",
+        )?;
         let c = &self.contact;
         check(
             "contact.relative_threshold",
@@ -506,6 +533,17 @@ mod tests {
     #[test]
     fn empty_config_is_default() {
         assert_eq!(Params::from_toml_str("").unwrap(), Params::default());
+    }
+
+    #[test]
+    fn the_kernel_on_the_skin_is_read_and_needs_the_fast_mode() {
+        let p = Params::from_toml_str("[density]\nkernel = \"skin\"\n").unwrap();
+        assert_eq!(p.density.kernel, DensityKernel::Skin);
+        let e =
+            Params::from_toml_str("[density]\nkernel = \"skin\"\nmode = \"exact\"\n").unwrap_err();
+        assert!(e.to_string().contains("density.kernel"), "{e}");
+        let e = Params::from_toml_str("[density]\nkernel = \"sphere\"\n").unwrap_err();
+        assert!(matches!(e, ParamsError::Parse(_)), "{e}");
     }
 
     #[test]

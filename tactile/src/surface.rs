@@ -239,7 +239,7 @@ impl SurfaceMean {
 impl Dome {
     /// Unit-sphere coordinates `(x, y, z)` of the dome point seen at `p`,
     /// with the polar angle clamped to [`MAX_POLAR_RAD`].
-    fn lift(&self, p: PointPx) -> [f64; 3] {
+    pub(crate) fn lift(&self, p: PointPx) -> [f64; 3] {
         let (x, y) = (
             (p.x - self.centre.x) / self.radius_px,
             (p.y - self.centre.y) / self.radius_px,

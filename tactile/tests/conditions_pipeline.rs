@@ -8,7 +8,7 @@
 use dexitac_tactile::area::AreaSpec;
 use dexitac_tactile::bench::{self, Sample};
 use dexitac_tactile::calibrate;
-use dexitac_tactile::params::Params;
+use dexitac_tactile::params::{DensityKernel, Params};
 use dexitac_tactile::surface::Surface;
 use dexitac_tactile::synth::{self, Category};
 use dexitac_tactile::PointPx;
@@ -127,6 +127,30 @@ fn a_dome_is_recognised_and_its_contacts_located_without_radial_bias() {
             share >= floor,
             "{cat:?}: worst frame found {share:.3} of the markers"
         );
+        let (found, with, false_pos, median, max) = contacts(&s);
+        assert_eq!((found, false_pos), (with, 0), "{cat:?}");
+        assert!(
+            median <= 0.4 && max <= 3.5,
+            "{cat:?}: median {median:.2} px, max {max:.2} px"
+        );
+        let mut radial: Vec<f64> = s.iter().filter_map(|s| s.radial_error_px).collect();
+        radial.sort_by(f64::total_cmp);
+        let r = radial[radial.len() / 2];
+        assert!(r.abs() <= 0.3, "{cat:?}: radial error median {r:+.2} px");
+    }
+}
+
+#[test]
+fn a_dome_with_the_kernel_on_its_skin_keeps_every_contact_without_radial_bias() {
+    // The generator's dome has no parallax (its contacts act along the
+    // skin): the skin's kernel locates its contacts as the image's does.
+    let mut setting = bench::settings()
+        .into_iter()
+        .find(|s| s.name.starts_with("default"))
+        .expect("the default setting");
+    setting.params.density.kernel = DensityKernel::Skin;
+    for cat in [Category::Dome, Category::TacTip] {
+        let s = bench::evaluate(&setting, &[cat], FRAMES, 640, 480, 7).expect("calibrates");
         let (found, with, false_pos, median, max) = contacts(&s);
         assert_eq!((found, false_pos), (with, 0), "{cat:?}");
         assert!(

@@ -25,6 +25,7 @@ fn setup(w: usize, h: usize, h_px: f64, mode: DensityMode, step: usize) -> Densi
         mode,
         step_px: step,
         truncate_sigmas: 3.0,
+        skin: None,
     }
 }
 

@@ -176,6 +176,7 @@ fn view_setup(width: usize, height: usize, params: &Params) -> DensitySetup {
         mode: DensityMode::Fast,
         step_px: params.density.grid_step_px.max(1) as usize,
         truncate_sigmas: params.density.truncate_sigmas,
+        skin: None,
     }
 }
 
