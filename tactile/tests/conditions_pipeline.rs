@@ -15,12 +15,35 @@ use dexitac_tactile::PointPx;
 
 const FRAMES: usize = 8;
 
-fn samples(cat: Category) -> Vec<Sample> {
-    let setting = bench::settings()
+/// The default setting (fast, step 8, tracking).
+fn default_setting() -> bench::Setting {
+    bench::settings()
         .into_iter()
         .find(|s| s.name.starts_with("default"))
-        .expect("the default setting");
-    bench::evaluate(&setting, &[cat], FRAMES, 640, 480, 7).expect("calibrates")
+        .expect("the default setting")
+}
+
+fn samples_with(setting: &bench::Setting, cat: Category) -> Vec<Sample> {
+    bench::evaluate(setting, &[cat], FRAMES, 640, 480, 7).expect("calibrates")
+}
+
+fn samples(cat: Category) -> Vec<Sample> {
+    samples_with(&default_setting(), cat)
+}
+
+/// Every contact of a dome's frames `s` found, none false, within 0.4 px
+/// (median) and 3.5 px (max), and a radial error median within 0.3 px.
+fn assert_dome_contacts(cat: Category, s: &[Sample]) {
+    let (found, with, false_pos, median, max) = contacts(s);
+    assert_eq!((found, false_pos), (with, 0), "{cat:?}");
+    assert!(
+        median <= 0.4 && max <= 3.5,
+        "{cat:?}: median {median:.2} px, max {max:.2} px"
+    );
+    let mut radial: Vec<f64> = s.iter().filter_map(|s| s.radial_error_px).collect();
+    radial.sort_by(f64::total_cmp);
+    let r = radial[radial.len() / 2];
+    assert!(r.abs() <= 0.3, "{cat:?}: radial error median {r:+.2} px");
 }
 
 /// Markers found within a quarter pitch / true markers, worst frame.
@@ -127,16 +150,7 @@ fn a_dome_is_recognised_and_its_contacts_located_without_radial_bias() {
             share >= floor,
             "{cat:?}: worst frame found {share:.3} of the markers"
         );
-        let (found, with, false_pos, median, max) = contacts(&s);
-        assert_eq!((found, false_pos), (with, 0), "{cat:?}");
-        assert!(
-            median <= 0.4 && max <= 3.5,
-            "{cat:?}: median {median:.2} px, max {max:.2} px"
-        );
-        let mut radial: Vec<f64> = s.iter().filter_map(|s| s.radial_error_px).collect();
-        radial.sort_by(f64::total_cmp);
-        let r = radial[radial.len() / 2];
-        assert!(r.abs() <= 0.3, "{cat:?}: radial error median {r:+.2} px");
+        assert_dome_contacts(cat, &s);
     }
 }
 
@@ -144,23 +158,10 @@ fn a_dome_is_recognised_and_its_contacts_located_without_radial_bias() {
 fn a_dome_with_the_kernel_on_its_skin_keeps_every_contact_without_radial_bias() {
     // The generator's dome has no parallax (its contacts act along the
     // skin): the skin's kernel locates its contacts as the image's does.
-    let mut setting = bench::settings()
-        .into_iter()
-        .find(|s| s.name.starts_with("default"))
-        .expect("the default setting");
+    let mut setting = default_setting();
     setting.params.density.kernel = DensityKernel::Skin;
     for cat in [Category::Dome, Category::TacTip] {
-        let s = bench::evaluate(&setting, &[cat], FRAMES, 640, 480, 7).expect("calibrates");
-        let (found, with, false_pos, median, max) = contacts(&s);
-        assert_eq!((found, false_pos), (with, 0), "{cat:?}");
-        assert!(
-            median <= 0.4 && max <= 3.5,
-            "{cat:?}: median {median:.2} px, max {max:.2} px"
-        );
-        let mut radial: Vec<f64> = s.iter().filter_map(|s| s.radial_error_px).collect();
-        radial.sort_by(f64::total_cmp);
-        let r = radial[radial.len() / 2];
-        assert!(r.abs() <= 0.3, "{cat:?}: radial error median {r:+.2} px");
+        assert_dome_contacts(cat, &samples_with(&setting, cat));
     }
 }
 
