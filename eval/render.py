@@ -413,7 +413,7 @@ def deform(sensor, contact: dict | None):
     dur = (ur_of(r + h) - ur_of(np.maximum(r - h, 0))) / (r + h - np.maximum(r - h, 0))
     div = dur + ur / np.maximum(r, 0.3)
     q2 = q1 + (g0 * ur)[:, None] * u_dir
-    weff = g0 * w if PARALLAX else 0.0 * w
+    weff = g0 * w if PARALLAX else 0.0
     p3 = sensor.to3d(q2, weff)
     tilt = g0 * tilt
     grow = np.sqrt(np.clip(1 + SIZE_GAIN * g0 * div, 0.6, 1.6))

@@ -5,8 +5,9 @@
 
 For each category ``DIR/<cat>/`` (rest.png, frames/*.png, truth.csv) it runs
 ``PATH analyze -q --rest DIR/<cat>/rest.png --out <tmp>/pred.csv DIR/<cat>/frames/*.png``
-(no config unless ``--config`` gives one for every category), joins the prediction with the truth on ``frame`` and reports per
-category and over all frames:
+(no config unless ``--config`` gives one for every category), joins the
+prediction with the truth on ``frame`` and reports per category and over all
+frames:
 
 - frames;
 - markers ±1 %: fraction of frames whose ``n_markers`` is within 1 % of the

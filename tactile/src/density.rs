@@ -150,8 +150,10 @@ pub struct DensitySetup {
     pub step_px: usize,
     /// Fast path truncation radius, units of h.
     pub truncate_sigmas: f64,
-    /// The dome whose skin the kernel is isotropic on
-    /// ([`crate::params::DensityKernel::Skin`]); `None`: in the image.
+    /// The dome whose skin the fast path's kernel is isotropic on
+    /// ([`crate::params::DensityKernel::Skin`]); `None`: in the image. The
+    /// exact path (the image kernel's reference) ignores it; a config
+    /// cannot ask for both.
     pub skin: Option<Dome>,
 }
 
