@@ -14,7 +14,7 @@ use crate::contact;
 use crate::density::{self, DensityMap, DensitySetup};
 use crate::frame::GreyFrame;
 use crate::markers::{self, Detector, MarkerError, RimBand};
-use crate::params::{DensityKernel, Params};
+use crate::params::{DensityKernel, FrameParams, Params, MAX_UPSCALE};
 use crate::surface::Surface;
 use crate::tracking::PointIndex;
 use crate::PointPx;
@@ -164,6 +164,33 @@ impl Calibration {
     pub fn area(&self) -> Option<&SensingArea> {
         self.detector.area.as_ref()
     }
+}
+
+/// Pin pitch below which the detector loses pins, working px. Measured on
+/// the other renderer's frames area-averaged to smaller sizes (BENCHMARKS.md,
+/// session 34): at 11.5 px (640x480) every category keeps its markers and
+/// contacts; at 8.6 px (480x360) 369 of 378 contacts are found, at 7.1 px
+/// 315, at 5.2 px (320x240) 129, and the rest loses a tenth of its pins.
+/// The same frames magnified back to this pitch find them all.
+pub const MIN_WORKING_PITCH_PX: f64 = 11.0;
+
+/// The frame preparation for a finer working frame when `cal`'s rest pins
+/// are closer than [`MIN_WORKING_PITCH_PX`]: `frame` with its
+/// [`FrameParams::upscale`] raised so that they are that far apart (at most
+/// [`MAX_UPSCALE`]), and `mm_per_px` lowered by as much (the same skin in
+/// more pixels). `None` when the pins are far enough apart, or the pitch
+/// is unknown.
+pub fn upscale_for(cal: &Calibration, frame: &FrameParams) -> Option<FrameParams> {
+    let pitch_px = cal.pitch_px;
+    if !(pitch_px.is_finite() && pitch_px > 0.0 && pitch_px < MIN_WORKING_PITCH_PX) {
+        return None;
+    }
+    let upscale = (frame.upscale * MIN_WORKING_PITCH_PX / pitch_px).min(MAX_UPSCALE);
+    (upscale > frame.upscale).then(|| FrameParams {
+        upscale,
+        mm_per_px: frame.mm_per_px * frame.upscale / upscale,
+        ..frame.clone()
+    })
 }
 
 /// Calibrates from rest frames (all the same working size).
@@ -1126,6 +1153,47 @@ mod tests {
             x0 > 0 && x1 < 640 && y0 < 30 && y1 > 450,
             "{x0} {y0} {x1} {y1}"
         );
+    }
+
+    #[test]
+    fn pins_too_close_for_the_detector_magnify_the_working_frame() {
+        let rest = rest_frame(&Category::Nominal.sensor(640, 480, 11), 3).image;
+        let raw = crate::frame::RawFrame {
+            width: rest.width(),
+            height: rest.height(),
+            channels: 1,
+            data: rest.data(),
+        };
+        let at = |frame: &FrameParams| {
+            let params = Params {
+                frame: frame.clone(),
+                ..Params::default()
+            };
+            let work = crate::frame::prepare(&raw, frame).unwrap().grey;
+            calibrate(&[work], &params).unwrap()
+        };
+        let native = at(&FrameParams::default());
+        assert!(upscale_for(&native, &FrameParams::default()).is_none());
+        // Half size: pins 7.5 px apart, magnified back to the detector's
+        // pitch, with the millimetres per pixel following.
+        let half = FrameParams {
+            work_width_px: 320,
+            work_height_px: 240,
+            ..FrameParams::default()
+        };
+        let small = at(&half);
+        let finer = upscale_for(&small, &half).expect("pins closer than the detector's pitch");
+        let gain = MIN_WORKING_PITCH_PX / small.pitch_px;
+        assert!((finer.upscale - gain).abs() < 1e-9, "{finer:?}");
+        assert!((finer.mm_per_px * finer.upscale - half.mm_per_px).abs() < 1e-12);
+        let magnified = at(&finer);
+        assert!(
+            (magnified.pitch_px / MIN_WORKING_PITCH_PX - 1.0).abs() < 0.05,
+            "{}",
+            magnified.pitch_px
+        );
+        let (n, m) = (native.rest_markers.len(), magnified.rest_markers.len());
+        assert!(m.abs_diff(n) * 50 <= n, "{m} of {n} markers");
     }
 
     #[test]

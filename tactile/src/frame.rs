@@ -6,8 +6,9 @@
 //! `(77 R + 150 G + 29 B) / 256` ([`Grey`]). Rescaling maps
 //! pixel centres (`x_in = crop_x + (x_work + 0.5) * sx - 0.5`); an integer
 //! downscale averages `k x k` blocks, any other downscale averages each
-//! working pixel's footprint (area weights), and an upscale (only when
-//! stretching, `keep_aspect = false`) samples bilinearly.
+//! working pixel's footprint (area weights), and an upscale (stretching,
+//! `keep_aspect = false`, or [`FrameParams::upscale`]) interpolates
+//! linearly.
 //! [`Prepared::to_input`] maps working coordinates back to the input image.
 //! The sensing-area mask comes from the rest calibration
 //! ([`crate::calibrate`]).
@@ -326,19 +327,22 @@ pub fn map_for(width: usize, height: usize, params: &FrameParams) -> WorkToInput
 /// with `keep_aspect` the region's aspect ratio, scaled down to fit in the
 /// configured size and never up (a square 420x420 crop stays 420x420, a
 /// 1280x960 frame becomes 640x480, nothing is stretched; upscaling adds no
-/// information, only pixels to search).
+/// information, only pixels to search); then times
+/// [`FrameParams::upscale`] (pins too small for the detector).
 pub fn working_size(cw: usize, ch: usize, params: &FrameParams) -> (usize, usize) {
+    let up = params.upscale.clamp(1.0, crate::params::MAX_UPSCALE);
+    let times = |v: usize| (v as f64 * up).round() as usize;
     let (ow, oh) = (
         params.work_width_px as usize,
         params.work_height_px as usize,
     );
     if !params.keep_aspect || cw == 0 || ch == 0 {
-        return (ow, oh);
+        return (times(ow), times(oh));
     }
     let s = (ow as f64 / cw as f64).min(oh as f64 / ch as f64).min(1.0);
     (
-        ((cw as f64 * s).round() as usize).clamp(1, ow),
-        ((ch as f64 * s).round() as usize).clamp(1, oh),
+        ((cw as f64 * s * up).round() as usize).clamp(1, times(ow)),
+        ((ch as f64 * s * up).round() as usize).clamp(1, times(oh)),
     )
 }
 
@@ -500,10 +504,8 @@ fn resize(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> GreyFrame 
         d
     } else if rw % ow == 0 && rh % oh == 0 && rw / ow == rh / oh {
         block_average(src, rect, rw / ow, ow, oh)
-    } else if rw >= ow && rh >= oh {
-        area_average(src, rect, ow, oh)
     } else {
-        bilinear(src, rect, ow, oh)
+        resample(src, rect, ow, oh)
     };
     GreyFrame {
         width: ow,
@@ -530,11 +532,11 @@ fn block_average(src: &GreyFrame, rect: [usize; 4], k: usize, ow: usize, oh: usi
     out
 }
 
-/// The taps of a 1-D area (box) downscale of `n_in` samples to `n_out <=
-/// n_in`: output `k` spans input `[k s, (k + 1) s)` (`s = n_in / n_out`),
-/// and each input sample it touches weighs the length of the span it
-/// covers, in `one`ths (the weights of an output sum to exactly `one`, so
-/// a flat frame stays flat).
+/// The taps of a 1-D resampling of `n_in` samples to `n_out`, in `one`ths
+/// (the weights of an output sum to exactly `one`, so a flat frame stays
+/// flat). A downscale ([`AreaTaps::area`]) averages each output's span; an
+/// upscale ([`AreaTaps::linear`]) interpolates between the two samples
+/// around its centre.
 struct AreaTaps {
     /// First input sample of each output.
     start: Vec<usize>,
@@ -545,7 +547,42 @@ struct AreaTaps {
 }
 
 impl AreaTaps {
+    /// The taps for `n_in` to `n_out` samples: [`Self::area`] when
+    /// `n_out <= n_in`, else [`Self::linear`].
     fn new(n_in: usize, n_out: usize, one: u32) -> Self {
+        if n_out <= n_in {
+            Self::area(n_in, n_out, one)
+        } else {
+            Self::linear(n_in, n_out, one)
+        }
+    }
+
+    /// Linear interpolation (`n_out > n_in`): output `k`'s centre is input
+    /// `(k + 0.5) s - 0.5` (`s = n_in / n_out`, pixel centres kept),
+    /// clamped to the first and last samples.
+    fn linear(n_in: usize, n_out: usize, one: u32) -> Self {
+        let s = n_in as f64 / n_out as f64;
+        let last = n_in.saturating_sub(1);
+        let mut start = Vec::with_capacity(n_out);
+        let mut weights = Vec::with_capacity(2 * n_out);
+        for k in 0..n_out {
+            let f = ((k as f64 + 0.5) * s - 0.5).clamp(0.0, last as f64);
+            let first = (f.floor() as usize).min(last.saturating_sub(1));
+            let far = ((f - first as f64) * one as f64).round() as u32;
+            start.push(first);
+            weights.extend([one - far.min(one), far.min(one)]);
+        }
+        Self {
+            start,
+            len: 2,
+            weights,
+        }
+    }
+
+    /// Area (box) averaging (`n_out <= n_in`): output `k` spans input
+    /// `[k s, (k + 1) s)` (`s = n_in / n_out`), and each input sample it
+    /// touches weighs the length of the span it covers.
+    fn area(n_in: usize, n_out: usize, one: u32) -> Self {
         let s = n_in as f64 / n_out as f64;
         let len = s.ceil() as usize + 1;
         let mut start = Vec::with_capacity(n_out);
@@ -592,14 +629,15 @@ const AREA_ONE_DOWN: u32 = 256;
 /// that, below 2^28, in `u32`).
 const AREA_ONE_ACROSS: u32 = 4096;
 
-/// Area-average downscale of `rect` to `ow x oh` (`ow <= rect`'s width,
-/// `oh <=` its height): each output pixel is the mean of the input pixels
-/// its footprint covers, weighted by how much of each it covers (what
-/// OpenCV's `INTER_AREA` computes), separably and in fixed point, within
-/// about a grey level of the exact mean. Bilinear sampling would read only
+/// `rect` resampled to `ow x oh`, separably and in fixed point
+/// ([`AreaTaps`]), each axis on its own: where it shrinks, each output
+/// pixel is the mean of the input pixels its footprint covers, weighted by
+/// how much of each it covers (what OpenCV's `INTER_AREA` computes), within
+/// about a grey level of the exact mean (bilinear sampling would read only
 /// the 4 pixels nearest each output's centre: at 1.5x it drops half the
-/// input's pixels, aliasing pins and noise.
-fn area_average(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
+/// input's pixels, aliasing pins and noise); where it grows, linearly
+/// interpolated.
+fn resample(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
     let [rx, ry, rw, rh] = rect;
     let across = AreaTaps::new(rw, ow, AREA_ONE_ACROSS);
     let down = AreaTaps::new(rh, oh, AREA_ONE_DOWN);
@@ -652,7 +690,7 @@ fn area_average(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<
     out
 }
 
-/// One output row of [`area_average`]'s pass across, for `L` taps an
+/// One output row of [`resample`]'s pass across, for `L` taps an
 /// output (a fixed block each: unrolled, one bounds check).
 fn across_row<const L: usize>(across: &AreaTaps, column_sums: &[u16], out_row: &mut [u8]) {
     let taps = across.start.iter().zip(across.weights.chunks_exact(L));
@@ -679,32 +717,6 @@ fn across_row<const L: usize>(across: &AreaTaps, column_sums: &[u16], out_row: &
 fn area_pixel(sum: u32) -> u8 {
     const ONE: u32 = AREA_ONE_DOWN * AREA_ONE_ACROSS;
     (sum.wrapping_add(ONE / 2) / ONE).min(255) as u8
-}
-
-fn bilinear(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
-    let [rx, ry, rw, rh] = rect;
-    let sx = rw as f64 / ow as f64;
-    let sy = rh as f64 / oh as f64;
-    let mut out = Vec::with_capacity(ow * oh);
-    let max_x = (rw - 1) as f64;
-    let max_y = (rh - 1) as f64;
-    for y in 0..oh {
-        let fy = ((y as f64 + 0.5) * sy - 0.5).clamp(0.0, max_y);
-        let y0 = fy.floor() as usize;
-        let y1 = (y0 + 1).min(rh - 1);
-        let ty = fy - y0 as f64;
-        for x in 0..ow {
-            let fx = ((x as f64 + 0.5) * sx - 0.5).clamp(0.0, max_x);
-            let x0 = fx.floor() as usize;
-            let x1 = (x0 + 1).min(rw - 1);
-            let tx = fx - x0 as f64;
-            let at = |xx: usize, yy: usize| src.data[(ry + yy) * src.width + rx + xx] as f64;
-            let top = at(x0, y0) * (1.0 - tx) + at(x1, y0) * tx;
-            let bottom = at(x0, y1) * (1.0 - tx) + at(x1, y1) * tx;
-            out.push((top * (1.0 - ty) + bottom * ty).round().clamp(0.0, 255.0) as u8);
-        }
-    }
-    out
 }
 
 #[cfg(test)]
@@ -928,7 +940,7 @@ mod tests {
         ) {
             let rect = [0, 0, w, h];
             let frame = GreyFrame::new(w, h, pixels.clone()).unwrap();
-            let got = area_average(&frame, rect, ow, oh);
+            let got = resample(&frame, rect, ow, oh);
             let steps = |n: usize, o: usize| (n as f64 / o as f64).ceil();
             let bound = 0.5
                 + 255.0 * steps(h, oh) / (2.0 * AREA_ONE_DOWN as f64)
@@ -937,7 +949,7 @@ mod tests {
                 proptest::prop_assert!((*g as f64 - want).abs() <= bound, "{} vs {}", g, want);
             }
             let flat_frame = GreyFrame::new(w, h, vec![flat; w * h]).unwrap();
-            let got = area_average(&flat_frame, rect, ow, oh);
+            let got = resample(&flat_frame, rect, ow, oh);
             proptest::prop_assert!(got.iter().all(|&v| v == flat));
         }
     }
@@ -978,5 +990,73 @@ mod tests {
         assert_eq!(p.grey.data()[0], 0);
         assert_eq!(p.grey.data()[3], 255);
         assert!(p.grey.data()[1] > 0 && p.grey.data()[1] < 128);
+    }
+
+    #[test]
+    fn upscale_magnifies_the_fitted_size_and_maps_back() {
+        let data: Vec<u8> = (0..12).map(|v| v * 20).collect();
+        let raw = RawFrame {
+            width: 4,
+            height: 3,
+            channels: 1,
+            data: &data,
+        };
+        let up = FrameParams {
+            upscale: 2.0,
+            ..params(640, 480)
+        };
+        let p = prepare(&raw, &up).unwrap();
+        assert_eq!((p.grey.width(), p.grey.height()), (8, 6));
+        // Working pixel (1, 1) is input (0.25, 0.25): between the first two
+        // pixels of the first two rows, a quarter of the way.
+        assert_eq!(p.to_input(PointPx::new(1.0, 1.0)), PointPx::new(0.25, 0.25));
+        let v = |x: f64, y: f64| 20.0 * (x + 4.0 * y);
+        assert!((p.grey.data()[8 + 1] as f64 - v(0.25, 0.25)).abs() <= 1.0);
+        // A 1280x960 frame at upscale 1.5: fitted to 640x480, then 960x720.
+        assert_eq!(
+            working_size(
+                1280,
+                960,
+                &FrameParams {
+                    upscale: 1.5,
+                    ..FrameParams::default()
+                }
+            ),
+            (960, 720)
+        );
+    }
+
+    proptest::proptest! {
+        /// An upscale interpolates linearly between the two input pixels
+        /// around each working pixel's centre: within 1.5 grey levels of
+        /// the f64 bilinear value (1/256ths down the rows, half a unit
+        /// each, plus rounding).
+        #[test]
+        fn an_upscale_interpolates_linearly(
+            (w, h, ow, oh, pixels) in (1usize..12, 1usize..10)
+                .prop_flat_map(|(w, h)| (
+                    proptest::prelude::Just(w),
+                    proptest::prelude::Just(h),
+                    w..=3 * w,
+                    h..=3 * h,
+                    proptest::collection::vec(0u8..=255, w * h),
+                )),
+        ) {
+            let frame = GreyFrame::new(w, h, pixels.clone()).unwrap();
+            let got = resample(&frame, [0, 0, w, h], ow, oh);
+            let at = |x: usize, y: usize| pixels[y * w + x] as f64;
+            let centre = |k: usize, n: usize, o: usize| {
+                ((k as f64 + 0.5) * n as f64 / o as f64 - 0.5).clamp(0.0, (n - 1) as f64)
+            };
+            for (k, &g) in got.iter().enumerate() {
+                let (fx, fy) = (centre(k % ow, w, ow), centre(k / ow, h, oh));
+                let (x0, y0) = (fx.floor() as usize, fy.floor() as usize);
+                let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+                let (tx, ty) = (fx - x0 as f64, fy - y0 as f64);
+                let want = (at(x0, y0) * (1.0 - tx) + at(x1, y0) * tx) * (1.0 - ty)
+                    + (at(x0, y1) * (1.0 - tx) + at(x1, y1) * tx) * ty;
+                proptest::prop_assert!((g as f64 - want).abs() <= 1.5, "{} vs {}", g, want);
+            }
+        }
     }
 }

@@ -62,6 +62,9 @@ pub const MM_PER_PX: f64 = 0.1;
 /// Marker pitch of the DigiTac skin, px (Sec. III-B: 15 px between adjacent
 /// markers). Used for matching markers against the rest frame.
 pub const MARKER_PITCH_PX: f64 = 15.0;
+
+/// Largest [`FrameParams::upscale`].
+pub const MAX_UPSCALE: f64 = 8.0;
 /// Floor of the "marker moved" test, px. Not in the paper: below the
 /// jitter of a marker centroid at 640x480 under strong noise (about 0.05 px
 /// per axis at noise sigma 5) times [`MOVE_NOISE_SIGMAS`], it only matters on
@@ -141,6 +144,13 @@ pub struct FrameParams {
     pub keep_aspect: bool,
     /// How a colour frame becomes grey ([`Grey`]).
     pub grey: Grey,
+    /// Magnification of the working frame over the fitted size, 1..=8
+    /// (linear interpolation): for pins too small for the detector, about
+    /// [`crate::calibrate::MIN_WORKING_PITCH_PX`] apart or less (a 320x240
+    /// camera on a dense TacTip). `mm_per_px` is per working pixel, after
+    /// it. `dexitac analyze` picks it itself when the rest's pins are that
+    /// close ([`crate::calibrate::upscale_for`]).
+    pub upscale: f64,
 }
 
 /// How a colour frame becomes grey ([`crate::frame::to_grey`]).
@@ -168,6 +178,7 @@ impl Default for FrameParams {
             mm_per_px: MM_PER_PX,
             keep_aspect: true,
             grey: Grey::default(),
+            upscale: 1.0,
         }
     }
 }
@@ -389,6 +400,12 @@ impl Params {
             (16..=8192).contains(&f.work_height_px),
             "must be 16..=8192",
         )?;
+        check(
+            "frame.upscale",
+            f.upscale,
+            (1.0..=MAX_UPSCALE).contains(&f.upscale),
+            "must be 1..=8",
+        )?;
         if let Some(c) = f.crop_px {
             check(
                 "frame.crop_px",
@@ -567,6 +584,21 @@ mod tests {
                 ..
             }
         ));
+        for up in ["0.5", "9.0", "nan"] {
+            let e = Params::from_toml_str(&format!("[frame]\nupscale = {up}\n")).unwrap_err();
+            assert!(
+                matches!(
+                    e,
+                    ParamsError::Invalid {
+                        field: "frame.upscale",
+                        ..
+                    }
+                ),
+                "{up}: {e}"
+            );
+        }
+        let p = Params::from_toml_str("[frame]\nupscale = 2.5\n").unwrap();
+        assert_eq!(p.frame.upscale, 2.5);
     }
 
     #[test]

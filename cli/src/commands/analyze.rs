@@ -161,30 +161,25 @@ impl AnalyzeArgs {
 }
 
 fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
-    let params = load_sensor_config(args.config.as_deref())?;
+    let mut params = load_sensor_config(args.config.as_deref())?;
     let (files, mut failed) = expand(&args.frames);
-    let spaced = || {
-        let n = files.len().min(calibrate::REST_FROM_FRAMES_MAX);
-        (0..n)
-            .map(|k| &files[k * files.len() / n])
-            .collect::<Vec<_>>()
-    };
-    let (rest_prepared, (rest_w, rest_h), map) = if args.rest_from_frames {
-        load_rests(&spaced(), &params)?
-    } else {
-        load_rests(&args.rest.iter().collect::<Vec<_>>(), &params)?
-    };
-    let mut cal = if args.rest_from_frames {
-        calibrate::calibrate_from_frames(&rest_prepared, &params, map)
-    } else {
-        calibrate::calibrate_mapped(&rest_prepared, &params, map)
+    let (mut cal, mut rest_size) = calibrate_rest(args, &params, &files)?;
+    if let Some(finer) = calibrate::upscale_for(&cal, &params.frame) {
+        tracing::info!(
+            "the rest's pins are {:.1} px apart, too close for the detector: working frame \
+             magnified {:.2}x (set [frame] upscale to choose)",
+            cal.pitch_px,
+            finer.upscale
+        );
+        params.frame = finer;
+        (cal, rest_size) = calibrate_rest(args, &params, &files)?;
     }
-    .map_err(|e| anyhow!("{e}"))?;
+    let (rest_w, rest_h) = rest_size;
     if let Some(w) = cal.holey_rest_warning() {
         let try_frames =
             !(args.rest_from_frames || args.keep_rest || files.len() < HOLEY_REST_MIN_FRAMES);
         let estimate = try_frames
-            .then(|| estimate_rest(&spaced(), &params, (rest_w, rest_h)))
+            .then(|| estimate_rest(&spaced(&files), &params, rest_size))
             .flatten();
         match estimate {
             Some(est) if est.fills_holes_of(&cal) => {
@@ -279,6 +274,34 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
         args.out.display()
     );
     Ok(failed)
+}
+
+/// Up to [`calibrate::REST_FROM_FRAMES_MAX`] evenly spaced frames of
+/// `files`.
+fn spaced(files: &[PathBuf]) -> Vec<&PathBuf> {
+    let n = files.len().min(calibrate::REST_FROM_FRAMES_MAX);
+    (0..n).map(|k| &files[k * files.len() / n]).collect()
+}
+
+/// The calibration from the rest frames (or from the frames themselves,
+/// with `--rest-from-frames`) and the rest's input size.
+fn calibrate_rest(
+    args: &AnalyzeArgs,
+    params: &Params,
+    files: &[PathBuf],
+) -> anyhow::Result<(calibrate::Calibration, (usize, usize))> {
+    let (rest_prepared, rest_size, map) = if args.rest_from_frames {
+        load_rests(&spaced(files), params)?
+    } else {
+        load_rests(&args.rest.iter().collect::<Vec<_>>(), params)?
+    };
+    let cal = if args.rest_from_frames {
+        calibrate::calibrate_from_frames(&rest_prepared, params, map)
+    } else {
+        calibrate::calibrate_mapped(&rest_prepared, params, map)
+    }
+    .map_err(|e| anyhow!("{e}"))?;
+    Ok((cal, rest_size))
 }
 
 /// One analysed frame.
