@@ -164,7 +164,7 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     let mut params = load_sensor_config(args.config.as_deref())?;
     let (files, mut failed) = expand(&args.frames);
     let (mut cal, mut rest_size) = calibrate_rest(args, &params, &files)?;
-    if let Some(finer) = calibrate::upscale_for(&cal, &params.frame) {
+    if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, rest_size) {
         tracing::info!(
             "the rest's pins are {:.1} px apart, too close for the detector: working frame \
              magnified {:.2}x (set [frame] upscale to choose)",
