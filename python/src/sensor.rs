@@ -192,6 +192,10 @@ impl Sensor {
     /// sensor config as TOML text (str), a TOML file (pathlib.Path) or a
     /// dict of the same tables, e.g. `{"density": {"kernel_width_px": 12}}`.
     ///
+    /// Pins closer than about 11 px (a small camera on a dense skin) are
+    /// detected on a magnified working frame, as in `dexitac analyze`
+    /// (`[frame] upscale`).
+    ///
     /// Raises ValueError on a bad array or config, or when the rest frame
     /// shows too few markers; OSError when a config file cannot be read.
     /// Warns (UserWarning) when the rest's marker lattice has holes (a
@@ -203,12 +207,21 @@ impl Sensor {
         rest: &Bound<'_, PyAny>,
         config: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let params = config::params(config)?;
+        let mut params = config::params(config)?;
         let frames = sequence(rest, "rest")?;
-        let (rest, map, input_size) = prepare_rest(&frames, &params, "rest")?;
-        let cal = py
+        let (mut rest, mut map, input_size) = prepare_rest(&frames, &params, "rest")?;
+        let mut cal = py
             .detach(|| calibrate::calibrate_mapped(&rest, &params, map))
             .map_err(calibration_error)?;
+        // Pins too close for the detector: a magnified working frame, as
+        // `dexitac analyze` does.
+        if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, input_size) {
+            params.frame = finer;
+            (rest, map, _) = prepare_rest(&frames, &params, "rest")?;
+            cal = py
+                .detach(|| calibrate::calibrate_mapped(&rest, &params, map))
+                .map_err(calibration_error)?;
+        }
         if let Some(w) = cal.holey_rest_warning() {
             let msg =
                 std::ffi::CString::new(w).map_err(|e| PyValueError::new_err(e.to_string()))?;
