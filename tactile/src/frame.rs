@@ -767,6 +767,16 @@ mod tests {
         }
     }
 
+    /// A grey raw frame of `data`.
+    fn grey_raw(width: usize, height: usize, data: &[u8]) -> RawFrame<'_> {
+        RawFrame {
+            width,
+            height,
+            channels: 1,
+            data,
+        }
+    }
+
     fn params(w: u32, h: u32) -> FrameParams {
         FrameParams {
             work_width_px: w,
@@ -837,12 +847,7 @@ mod tests {
     #[test]
     fn halving_averages_blocks_and_maps_back() {
         let data: Vec<u8> = (0..16).map(|i| (i * 10) as u8).collect();
-        let raw = RawFrame {
-            width: 4,
-            height: 4,
-            channels: 1,
-            data: &data,
-        };
+        let raw = grey_raw(4, 4, &data);
         let p = prepare(&raw, &params(2, 2)).unwrap();
         assert_eq!(p.grey.data(), &[25, 45, 105, 125]);
         let q = p.to_input(PointPx::new(0.0, 0.0));
@@ -852,12 +857,7 @@ mod tests {
     #[test]
     fn same_size_is_identity_and_crop_is_checked() {
         let data: Vec<u8> = (0..12).collect();
-        let raw = RawFrame {
-            width: 4,
-            height: 3,
-            channels: 1,
-            data: &data,
-        };
+        let raw = grey_raw(4, 3, &data);
         let p = prepare(&raw, &params(4, 3)).unwrap();
         assert_eq!(p.grey.data(), &data[..]);
         assert_eq!(p.to_input(PointPx::new(2.0, 1.0)), PointPx::new(2.0, 1.0));
@@ -919,6 +919,23 @@ mod tests {
         out
     }
 
+    /// A `w x h` frame of random pixels (`w`, `h` from `sizes`) and an
+    /// output size whose sides `out` draws from each input side.
+    fn resample_case(
+        sizes: (std::ops::Range<usize>, std::ops::Range<usize>),
+        out: fn(usize) -> std::ops::RangeInclusive<usize>,
+    ) -> impl Strategy<Value = (usize, usize, usize, usize, Vec<u8>)> {
+        sizes.prop_flat_map(move |(w, h)| {
+            (
+                proptest::prelude::Just(w),
+                proptest::prelude::Just(h),
+                out(w),
+                out(h),
+                proptest::collection::vec(0u8..=255, w * h),
+            )
+        })
+    }
+
     proptest::proptest! {
         /// A non-integer downscale averages each working pixel's
         /// footprint, within the fixed point's bound of the f64 area
@@ -928,14 +945,7 @@ mod tests {
         /// stays exactly flat.
         #[test]
         fn a_downscale_averages_each_footprint(
-            (w, h, ow, oh, pixels) in (2usize..30, 2usize..24)
-                .prop_flat_map(|(w, h)| (
-                    proptest::prelude::Just(w),
-                    proptest::prelude::Just(h),
-                    1..=w,
-                    1..=h,
-                    proptest::collection::vec(0u8..=255, w * h),
-                )),
+            (w, h, ow, oh, pixels) in resample_case((2..30, 2..24), |n| 1..=n),
             flat in 0u8..=255,
         ) {
             let rect = [0, 0, w, h];
@@ -958,12 +968,7 @@ mod tests {
     fn a_non_integer_downscale_averages_and_maps_back() {
         // 3x3 -> 2x2: each working pixel covers 1.5 x 1.5 input pixels.
         let data = [0u8, 90, 180, 0, 90, 180, 0, 90, 180];
-        let raw = RawFrame {
-            width: 3,
-            height: 3,
-            channels: 1,
-            data: &data,
-        };
+        let raw = grey_raw(3, 3, &data);
         let p = prepare(&raw, &params(2, 2)).unwrap();
         // (0 + 0.5 * 90) / 1.5 = 30, (0.5 * 90 + 180) / 1.5 = 150.
         assert_eq!(p.grey.data(), &[30, 150, 30, 150]);
@@ -973,12 +978,7 @@ mod tests {
     #[test]
     fn upscale_is_bilinear_and_bounded() {
         let data = [0u8, 255];
-        let raw = RawFrame {
-            width: 2,
-            height: 1,
-            channels: 1,
-            data: &data,
-        };
+        let raw = grey_raw(2, 1, &data);
         // Upscaling only happens when asked to stretch.
         assert_eq!(prepare(&raw, &params(4, 2)).unwrap().grey.width(), 2);
         let stretch = FrameParams {
@@ -995,12 +995,7 @@ mod tests {
     #[test]
     fn upscale_magnifies_the_fitted_size_and_maps_back() {
         let data: Vec<u8> = (0..12).map(|v| v * 20).collect();
-        let raw = RawFrame {
-            width: 4,
-            height: 3,
-            channels: 1,
-            data: &data,
-        };
+        let raw = grey_raw(4, 3, &data);
         let up = FrameParams {
             upscale: 2.0,
             ..params(640, 480)
@@ -1033,14 +1028,7 @@ mod tests {
         /// each, plus rounding).
         #[test]
         fn an_upscale_interpolates_linearly(
-            (w, h, ow, oh, pixels) in (1usize..12, 1usize..10)
-                .prop_flat_map(|(w, h)| (
-                    proptest::prelude::Just(w),
-                    proptest::prelude::Just(h),
-                    w..=3 * w,
-                    h..=3 * h,
-                    proptest::collection::vec(0u8..=255, w * h),
-                )),
+            (w, h, ow, oh, pixels) in resample_case((1..12, 1..10), |n| n..=3 * n),
         ) {
             let frame = GreyFrame::new(w, h, pixels.clone()).unwrap();
             let got = resample(&frame, [0, 0, w, h], ow, oh);
