@@ -534,10 +534,10 @@ fn block_average(src: &GreyFrame, rect: [usize; 4], k: usize, ow: usize, oh: usi
 
 /// The taps of a 1-D resampling of `n_in` samples to `n_out`, in `one`ths
 /// (the weights of an output sum to exactly `one`, so a flat frame stays
-/// flat). A downscale ([`AreaTaps::area`]) averages each output's span; an
-/// upscale ([`AreaTaps::linear`]) interpolates between the two samples
+/// flat). A downscale ([`Taps::area`]) averages each output's span; an
+/// upscale ([`Taps::linear`]) interpolates between the two samples
 /// around its centre.
-struct AreaTaps {
+struct Taps {
     /// First input sample of each output.
     start: Vec<usize>,
     /// Taps per output (the longest span's).
@@ -546,7 +546,7 @@ struct AreaTaps {
     weights: Vec<u32>,
 }
 
-impl AreaTaps {
+impl Taps {
     /// The taps for `n_in` to `n_out` samples: [`Self::area`] when
     /// `n_out <= n_in`, else [`Self::linear`].
     fn new(n_in: usize, n_out: usize, one: u32) -> Self {
@@ -620,17 +620,17 @@ impl AreaTaps {
     }
 }
 
-/// [`AreaTaps`] weights down the rows: 1/256ths, so that a weighted sum of
+/// [`Taps`] weights down the rows: 1/256ths, so that a weighted sum of
 /// 8-bit pixels fits in `u16` (at most 256 x 255), whose multiplies and
 /// adds SSE2 has (it has no 32-bit multiply).
 const AREA_ONE_DOWN: u32 = 256;
 
-/// [`AreaTaps`] weights across: 1/4096ths (a row sum of at most 2^16 times
+/// [`Taps`] weights across: 1/4096ths (a row sum of at most 2^16 times
 /// that, below 2^28, in `u32`).
 const AREA_ONE_ACROSS: u32 = 4096;
 
 /// `rect` resampled to `ow x oh`, separably and in fixed point
-/// ([`AreaTaps`]), each axis on its own: where it shrinks, each output
+/// ([`Taps`]), each axis on its own: where it shrinks, each output
 /// pixel is the mean of the input pixels its footprint covers, weighted by
 /// how much of each it covers (what OpenCV's `INTER_AREA` computes), within
 /// about a grey level of the exact mean (bilinear sampling would read only
@@ -639,8 +639,8 @@ const AREA_ONE_ACROSS: u32 = 4096;
 /// interpolated.
 fn resample(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
     let [rx, ry, rw, rh] = rect;
-    let across = AreaTaps::new(rw, ow, AREA_ONE_ACROSS);
-    let down = AreaTaps::new(rh, oh, AREA_ONE_DOWN);
+    let across = Taps::new(rw, ow, AREA_ONE_ACROSS);
+    let down = Taps::new(rh, oh, AREA_ONE_DOWN);
     // `across.len` spare zeros past the end: every output's taps can be
     // read as one fixed-size block.
     let mut column_sums = vec![0u16; rw + across.len];
@@ -692,10 +692,10 @@ fn resample(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> 
 
 /// One output row of [`resample`]'s pass across, for `L` taps an
 /// output (a fixed block each: unrolled, one bounds check).
-fn across_row<const L: usize>(across: &AreaTaps, column_sums: &[u16], out_row: &mut [u8]) {
+fn across_row<const L: usize>(across: &Taps, column_sums: &[u16], out_row: &mut [u8]) {
     let taps = across.start.iter().zip(across.weights.chunks_exact(L));
     for (o, (&first, wx)) in out_row.iter_mut().zip(taps) {
-        // Always there (`AreaTaps` starts each output's taps early enough,
+        // Always there (`Taps` starts each output's taps early enough,
         // and the sums have `L` spare zeros).
         let (Ok(wx), Some(Ok(sums))) = (
             <&[u32; L]>::try_from(wx),
