@@ -220,6 +220,20 @@ pub fn calibrated(
         if let Some(w) = cal.holey_rest_warning() {
             tracing::warn!("{}: {w}", s.label);
         }
+        // Only `analyze` (and the Python package) magnify the working frame
+        // themselves: a live source says what to set.
+        if cal.pitch_px > 0.0 && cal.pitch_px < calibrate::MIN_WORKING_PITCH_PX {
+            let up = params.frame.upscale * calibrate::MIN_WORKING_PITCH_PX / cal.pitch_px;
+            tracing::warn!(
+                "{}: the rest's pins are {:.1} px apart, under the detector's {} px: pins will \
+                 be lost; set [frame] upscale = {:.1} (and mm_per_px divided by as much) in \
+                 the sensor config",
+                s.label,
+                cal.pitch_px,
+                calibrate::MIN_WORKING_PITCH_PX,
+                (up * 10.0).ceil() / 10.0
+            );
+        }
         sensors.push(Sensor {
             source: s.source,
             pipeline: Pipeline::new(cal, params.clone()),
