@@ -221,17 +221,21 @@ pub fn calibrated(
             tracing::warn!("{}: {w}", s.label);
         }
         // Only `analyze` (and the Python package) magnify the working frame
-        // themselves: a live source says what to set.
-        if cal.pitch_px > 0.0 && cal.pitch_px < calibrate::MIN_WORKING_PITCH_PX {
-            let up = params.frame.upscale * calibrate::MIN_WORKING_PITCH_PX / cal.pitch_px;
+        // themselves: a live source says what they would set. The rest's
+        // region (its crop, or the whole input) in input px, from the map.
+        let region_px = (
+            (cal.width as f64 * s.map.scale_x).round() as usize,
+            (cal.height as f64 * s.map.scale_y).round() as usize,
+        );
+        if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, region_px) {
             tracing::warn!(
                 "{}: the rest's pins are {:.1} px apart, under the detector's {} px: pins will \
-                 be lost; set [frame] upscale = {:.1} (and mm_per_px divided by as much) in \
-                 the sensor config",
+                 be lost; set [frame] upscale = {:.2} and mm_per_px = {:.4} in the sensor config",
                 s.label,
                 cal.pitch_px,
                 calibrate::MIN_WORKING_PITCH_PX,
-                (up * 10.0).ceil() / 10.0
+                finer.upscale,
+                finer.mm_per_px
             );
         }
         sensors.push(Sensor {
