@@ -213,7 +213,13 @@ pub fn upscale_for(
         },
     );
     let native = region_w as f64 / fitted_w.max(1) as f64;
-    if frame.keep_aspect && upscale < native && native <= NATIVE_SNAP * upscale {
+    // Never past MAX_UPSCALE: `working_size` would clamp it, and
+    // `mm_per_px` below would not follow.
+    if frame.keep_aspect
+        && upscale < native
+        && native <= NATIVE_SNAP * upscale
+        && native <= MAX_UPSCALE
+    {
         upscale = native;
     }
     (upscale > frame.upscale).then(|| FrameParams {
@@ -1233,6 +1239,19 @@ mod tests {
         assert_eq!(crate::frame::working_size(1000, 480, &wide), (1000, 480));
         let wider = upscale_for(&small, &default, (1400, 480)).unwrap();
         assert!((wider.upscale - gain).abs() < 1e-9, "{wider:?}");
+        // Never past MAX_UPSCALE, even to take a frame at its own size.
+        let narrow = FrameParams {
+            work_width_px: 16,
+            work_height_px: 16,
+            ..FrameParams::default()
+        };
+        let tiny_pins = Calibration {
+            pitch_px: 1.5,
+            ..small.clone()
+        };
+        let most = upscale_for(&tiny_pins, &narrow, (140, 140)).unwrap();
+        assert!(most.upscale <= MAX_UPSCALE, "{most:?}");
+        assert!((most.mm_per_px * most.upscale - narrow.mm_per_px).abs() < 1e-12);
     }
 
     #[test]
