@@ -2,6 +2,7 @@
 """Frames of eval/render.py under camera conditions the renderer never had.
 
     python eval/transform.py --frames DIR --out OUT [--scale S] [--jpeg Q] [--pad-width W]
+        [--rotate DEG] [--barrel K] [--gamma G] [--gain G] [--motion PX]
 
 Copies every category of ``DIR`` (from ``render.py --out DIR``) to ``OUT``
 with, in this order:
@@ -12,6 +13,19 @@ with, in this order:
   resolution;
 - ``--pad-width W``: the frame centred in a ``W`` px wide frame of dark grey
   (a 16:9 camera on a 4:3 sensor), the truth shifted;
+- ``--rotate DEG``: rest and frames rotated by ``DEG`` degrees
+  (anticlockwise in the image) about the frame's centre, the corners filled
+  with dark grey (a camera mounted turned on its sensor), the truth rotated;
+- ``--barrel K``: rest and frames warped by the radial lens distortion
+  ``r_d = r (1 + K (r / r_max)^2)`` (``r_max`` the half-diagonal; ``K < 0``
+  barrel, as a wide-angle lens), the truth mapped the same way;
+- ``--gamma G``: the frames only (not the rest) mapped by
+  ``255 (v / 255)^G`` per channel (a camera whose auto exposure or gamma
+  changed after the rest was taken);
+- ``--gain G``: the frames only multiplied by ``G`` and clipped at 255 (over
+  exposure: the pins saturate, more with ``G`` > 1);
+- ``--motion PX``: the frames only smeared along a line of ``PX`` px at
+  30 degrees (a tap faster than the shutter: motion blur, not a PSF);
 - ``--jpeg Q``: written as JPEG of quality ``Q`` (a camera's MJPEG stream),
   with ``rest.png`` a link to ``rest.jpg`` so that ``render_eval.py`` runs as
   on the PNG frames.
@@ -24,12 +38,64 @@ pixels.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+
+def lens_maps(w: int, h: int, k: float) -> tuple[np.ndarray, np.ndarray]:
+    """For every output pixel, the input pixel the distortion puts there:
+    the inverse of ``r_d = r (1 + k (r / r_max)^2)``, by fixed-point
+    iteration (converges for |k| < 0.3)."""
+    cx, cy, rmax = (w - 1) / 2, (h - 1) / 2, math.hypot(w, h) / 2
+    yd, xd = np.mgrid[0:h, 0:w].astype(np.float64)
+    dx, dy = (xd - cx) / rmax, (yd - cy) / rmax
+    rd = np.hypot(dx, dy)
+    r = rd.copy()
+    for _ in range(30):
+        r = rd / (1 + k * r * r)
+    s = np.where(rd > 0, r / np.maximum(rd, 1e-12), 1.0)
+    return (cx + dx * s * rmax).astype(np.float32), (cy + dy * s * rmax).astype(np.float32)
+
+
+def distort_point(x: float, y: float, w: int, h: int, k: float) -> tuple[float, float]:
+    cx, cy, rmax = (w - 1) / 2, (h - 1) / 2, math.hypot(w, h) / 2
+    dx, dy = (x - cx) / rmax, (y - cy) / rmax
+    f = 1 + k * (dx * dx + dy * dy)
+    return cx + dx * f * rmax, cy + dy * f * rmax
+
+
+def geometry(img: np.ndarray, a: argparse.Namespace) -> np.ndarray:
+    h, w = img.shape[:2]
+    if a.rotate:
+        m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), a.rotate, 1.0)
+        img = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_LINEAR, borderValue=(20, 20, 20))
+    if a.barrel:
+        mx, my = lens_maps(w, h, a.barrel)
+        img = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderValue=(20, 20, 20))
+    return img
+
+
+def exposure(img: np.ndarray, a: argparse.Namespace) -> np.ndarray:
+    """The frame-only conditions (the rest keeps the renderer's)."""
+    if a.motion:
+        n = max(1, int(round(a.motion)))
+        k = np.zeros((n + 2, n + 2), np.float32)
+        c = (n + 1) / 2
+        for t in np.linspace(-n / 2, n / 2, 4 * n + 1):
+            x, y = c + t * math.cos(math.radians(30)), c - t * math.sin(math.radians(30))
+            k[int(round(y)), int(round(x))] += 1
+        img = cv2.filter2D(img, -1, k / k.sum(), borderType=cv2.BORDER_REFLECT)
+    f = img.astype(np.float64)
+    if a.gamma != 1.0:
+        f = 255.0 * (f / 255.0) ** a.gamma
+    if a.gain != 1.0:
+        f = f * a.gain
+    return np.clip(np.rint(f), 0, 255).astype(np.uint8)
 
 
 def transform(img: np.ndarray, scale: float, pad_width: int | None) -> tuple[np.ndarray, int]:
@@ -51,13 +117,25 @@ def main() -> None:
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--jpeg", type=int, default=None, metavar="Q")
     ap.add_argument("--pad-width", type=int, default=None, metavar="W")
+    ap.add_argument("--rotate", type=float, default=0.0, metavar="DEG")
+    ap.add_argument("--barrel", type=float, default=0.0, metavar="K")
+    ap.add_argument("--gamma", type=float, default=1.0, metavar="G")
+    ap.add_argument("--gain", type=float, default=1.0, metavar="G")
+    ap.add_argument("--motion", type=float, default=0.0, metavar="PX")
     a = ap.parse_args()
+    if not (abs(a.barrel) < 0.3 and a.gamma > 0 and a.gain > 0 and a.motion >= 0):
+        ap.error("need |--barrel| < 0.3, --gamma > 0, --gain > 0, --motion >= 0")
     for cat in sorted(p for p in a.frames.iterdir() if (p / "truth.csv").exists()):
         out = a.out / cat.name
         (out / "frames").mkdir(parents=True, exist_ok=True)
         left = 0
+        shape = None
         for f in [cat / "rest.png", *sorted((cat / "frames").glob("*.png"))]:
-            img, left = transform(cv2.imread(str(f), cv2.IMREAD_UNCHANGED), a.scale, a.pad_width)
+            img = geometry(cv2.imread(str(f), cv2.IMREAD_UNCHANGED), a)
+            shape = img.shape[:2]
+            if f.name != "rest.png":
+                img = exposure(img, a)
+            img, left = transform(img, a.scale, a.pad_width)
             dst = out / f.relative_to(cat)
             if a.jpeg is None:
                 cv2.imwrite(str(dst), img)
@@ -72,6 +150,13 @@ def main() -> None:
         for line in lines[1:]:
             p = line.split(",")
             x, y = float(p[1]), float(p[2])
+            if shape is not None and not math.isnan(x):
+                h, w = shape
+                if a.rotate:
+                    m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), a.rotate, 1.0)
+                    x, y = m @ np.array([x, y, 1.0])
+                if a.barrel:
+                    x, y = distort_point(x, y, w, h, a.barrel)
             p[1] = f"{(x + 0.5) * a.scale - 0.5 + left:.3f}"
             p[2] = f"{(y + 0.5) * a.scale - 0.5:.3f}"
             rows.append(",".join(p))
