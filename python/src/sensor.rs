@@ -151,6 +151,41 @@ fn calibration_error(e: calibrate::CalibrationError) -> PyErr {
     PyValueError::new_err(format!("rest calibration failed: {e}"))
 }
 
+/// `calibrate` on `frames` prepared with `params`; when the pins are too
+/// close for the detector, again on a working frame magnified as
+/// `dexitac analyze` does ([`calibrate::upscale_for`], which `params`
+/// then holds). Returns the calibration, the working frames, the map back
+/// to input px and the input size.
+fn calibrated(
+    py: Python<'_>,
+    frames: &[Bound<'_, PyAny>],
+    params: &mut Params,
+    what: &str,
+    calibrate: fn(
+        &[GreyFrame],
+        &Params,
+        WorkToInput,
+    ) -> Result<calibrate::Calibration, calibrate::CalibrationError>,
+) -> PyResult<(
+    calibrate::Calibration,
+    Vec<GreyFrame>,
+    WorkToInput,
+    (usize, usize),
+)> {
+    let (mut working, mut map, input_size) = prepare_rest(frames, params, what)?;
+    let mut cal = py
+        .detach(|| calibrate(&working, params, map))
+        .map_err(calibration_error)?;
+    if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, input_size) {
+        params.frame = finer;
+        (working, map, _) = prepare_rest(frames, params, what)?;
+        cal = py
+            .detach(|| calibrate(&working, params, map))
+            .map_err(calibration_error)?;
+    }
+    Ok((cal, working, map, input_size))
+}
+
 /// Prepares each array of `frames` with the config's frame parameters;
 /// all must have the same size. Returns the working frames, the map back to
 /// input px and the input size.
@@ -209,19 +244,13 @@ impl Sensor {
     ) -> PyResult<Self> {
         let mut params = config::params(config)?;
         let frames = sequence(rest, "rest")?;
-        let (mut rest, mut map, input_size) = prepare_rest(&frames, &params, "rest")?;
-        let mut cal = py
-            .detach(|| calibrate::calibrate_mapped(&rest, &params, map))
-            .map_err(calibration_error)?;
-        // Pins too close for the detector: a magnified working frame, as
-        // `dexitac analyze` does.
-        if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, input_size) {
-            params.frame = finer;
-            (rest, map, _) = prepare_rest(&frames, &params, "rest")?;
-            cal = py
-                .detach(|| calibrate::calibrate_mapped(&rest, &params, map))
-                .map_err(calibration_error)?;
-        }
+        let (cal, rest, map, input_size) = calibrated(
+            py,
+            &frames,
+            &mut params,
+            "rest",
+            calibrate::calibrate_mapped,
+        )?;
         if let Some(w) = cal.holey_rest_warning() {
             let msg =
                 std::ffi::CString::new(w).map_err(|e| PyValueError::new_err(e.to_string()))?;
@@ -241,7 +270,8 @@ impl Sensor {
     /// the pixel-wise median finds the pins, the frame nearest to it gives
     /// their places). When every frame presses the same place (a set of
     /// taps), the rest is a pressed skin (the lightest or the median
-    /// press): only deeper presses are seen.
+    /// press): only deeper presses are seen. Pins closer than about 11 px
+    /// are detected on a magnified working frame, as in `from_rest`.
     #[staticmethod]
     #[pyo3(signature = (frames, config=None))]
     fn from_rest_frames(
@@ -249,17 +279,20 @@ impl Sensor {
         frames: &Bound<'_, PyAny>,
         config: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let params = config::params(config)?;
+        let mut params = config::params(config)?;
         let all = sequence(frames, "frames")?;
         // The frames `dexitac analyze` picks: up to REST_FROM_FRAMES_MAX,
         // evenly spaced.
         let n = all.len().min(calibrate::REST_FROM_FRAMES_MAX);
         let picked: Vec<Bound<'_, PyAny>> =
             (0..n).map(|k| all[k * all.len() / n].clone()).collect();
-        let (working, map, input_size) = prepare_rest(&picked, &params, "frames")?;
-        let cal = py
-            .detach(|| calibrate::calibrate_from_frames(&working, &params, map))
-            .map_err(calibration_error)?;
+        let (cal, _, map, input_size) = calibrated(
+            py,
+            &picked,
+            &mut params,
+            "frames",
+            calibrate::calibrate_from_frames,
+        )?;
         Ok(Self {
             prepare: params.frame.clone(),
             pipeline: Pipeline::new(cal, params),

@@ -55,25 +55,46 @@ def test_process_matches_analyze(fixture, cli, tmp_path, request):
     assert contacts >= len(s.frames) // 2, "the comparison must cover contacts"
 
 
-def test_pins_too_close_are_magnified_as_in_analyze(nominal, cli, tmp_path):
-    # The frames halved (2x2 block means): pins 7.5 px apart, under the
-    # detector's 11 px. Both magnify the working frame alike, so the rows
-    # are the same; the millimetres per pixel follow the magnification.
-    half = lambda img: (img.reshape(240, 2, 320, 2).mean(axis=(1, 3)) + 0.5).astype(np.uint8)  # noqa: E731
-    rest, frames = half(nominal.rest), [half(f) for f in nominal.frames[:4]]
-    rest_path, paths = tmp_path / "rest.png", [tmp_path / f"{k:04d}.png" for k in range(len(frames))]
-    write_png(rest_path, rest)
+def half(img: np.ndarray) -> np.ndarray:
+    """A 640x480 frame halved (2x2 block means): the pins 7.5 px apart,
+    under the detector's 11 px."""
+    return (img.reshape(240, 2, 320, 2).mean(axis=(1, 3)) + 0.5).astype(np.uint8)
+
+
+def write_frames(folder: Path, frames: list[np.ndarray]) -> list[Path]:
+    paths = [folder / f"{k:04d}.png" for k in range(len(frames))]
     for path, frame in zip(paths, frames):
         write_png(path, frame)
-    rows = analyze_csv(cli, tmp_path, "--rest", rest_path, *paths)
-    sensor = dexitac.Sensor.from_rest(rest)
+    return paths
+
+
+def assert_magnified_rows_match(sensor, rows, paths, frames, markers: Path, min_contacts: int) -> None:
+    # Both magnify the working frame alike, so the rows are the same; the
+    # millimetres per pixel follow the magnification.
     assert sensor.mm_per_px < 0.1 * 0.75, sensor.mm_per_px
     contacts = 0
     for path, frame in zip(paths, frames):
         obs = sensor.process(frame)
         contacts += obs.contact is not None
-        assert_row_matches(rows[path.stem], obs, tmp_path / "markers" / f"{path.stem}.csv")
-    assert contacts >= 2, "the comparison must cover contacts"
+        assert_row_matches(rows[path.stem], obs, markers / f"{path.stem}.csv")
+    assert contacts >= min_contacts, "the comparison must cover contacts"
+
+
+def test_pins_too_close_are_magnified_as_in_analyze(nominal, cli, tmp_path):
+    rest, frames = half(nominal.rest), [half(f) for f in nominal.frames[:4]]
+    rest_path = tmp_path / "rest.png"
+    write_png(rest_path, rest)
+    paths = write_frames(tmp_path, frames)
+    rows = analyze_csv(cli, tmp_path, "--rest", rest_path, *paths)
+    assert_magnified_rows_match(dexitac.Sensor.from_rest(rest), rows, paths, frames, tmp_path / "markers", 2)
+
+
+def test_a_rest_from_close_pins_is_magnified_as_in_analyze(nominal, cli, tmp_path):
+    frames = [half(f) for f in nominal.frames]
+    paths = write_frames(tmp_path, frames)
+    rows = analyze_csv(cli, tmp_path, "--rest-from-frames", *paths)
+    sensor = dexitac.Sensor.from_rest_frames(frames)
+    assert_magnified_rows_match(sensor, rows, paths, frames, tmp_path / "markers", len(frames) // 2)
 
 
 def test_several_rest_frames_match_analyze(nominal, cli, tmp_path):
