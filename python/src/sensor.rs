@@ -151,27 +151,35 @@ fn calibration_error(e: calibrate::CalibrationError) -> PyErr {
     PyValueError::new_err(format!("rest calibration failed: {e}"))
 }
 
+/// A calibration on working frames ([`calibrated`]).
+struct Calibrated {
+    cal: calibrate::Calibration,
+    /// The working frames it was made on.
+    working: Vec<GreyFrame>,
+    /// Working to input px.
+    map: WorkToInput,
+    /// The input frames' size, px.
+    input_size: (usize, usize),
+}
+
+/// [`calibrate::calibrate_mapped`] or [`calibrate::calibrate_from_frames`].
+type Calibrate = fn(
+    &[GreyFrame],
+    &Params,
+    WorkToInput,
+) -> Result<calibrate::Calibration, calibrate::CalibrationError>;
+
 /// `calibrate` on `frames` prepared with `params`; when the pins are too
 /// close for the detector, again on a working frame magnified as
 /// `dexitac analyze` does ([`calibrate::upscale_for`], which `params`
-/// then holds). Returns the calibration, the working frames, the map back
-/// to input px and the input size.
+/// then holds).
 fn calibrated(
     py: Python<'_>,
     frames: &[Bound<'_, PyAny>],
     params: &mut Params,
     what: &str,
-    calibrate: fn(
-        &[GreyFrame],
-        &Params,
-        WorkToInput,
-    ) -> Result<calibrate::Calibration, calibrate::CalibrationError>,
-) -> PyResult<(
-    calibrate::Calibration,
-    Vec<GreyFrame>,
-    WorkToInput,
-    (usize, usize),
-)> {
+    calibrate: Calibrate,
+) -> PyResult<Calibrated> {
     let (mut working, mut map, input_size) = prepare_rest(frames, params, what)?;
     let mut cal = py
         .detach(|| calibrate(&working, params, map))
@@ -183,7 +191,12 @@ fn calibrated(
             .detach(|| calibrate(&working, params, map))
             .map_err(calibration_error)?;
     }
-    Ok((cal, working, map, input_size))
+    Ok(Calibrated {
+        cal,
+        working,
+        map,
+        input_size,
+    })
 }
 
 /// Prepares each array of `frames` with the config's frame parameters;
@@ -244,7 +257,12 @@ impl Sensor {
     ) -> PyResult<Self> {
         let mut params = config::params(config)?;
         let frames = sequence(rest, "rest")?;
-        let (cal, rest, map, input_size) = calibrated(
+        let Calibrated {
+            cal,
+            working: rest,
+            map,
+            input_size,
+        } = calibrated(
             py,
             &frames,
             &mut params,
@@ -286,7 +304,12 @@ impl Sensor {
         let n = all.len().min(calibrate::REST_FROM_FRAMES_MAX);
         let picked: Vec<Bound<'_, PyAny>> =
             (0..n).map(|k| all[k * all.len() / n].clone()).collect();
-        let (cal, _, map, input_size) = calibrated(
+        let Calibrated {
+            cal,
+            map,
+            input_size,
+            ..
+        } = calibrated(
             py,
             &picked,
             &mut params,
