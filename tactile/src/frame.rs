@@ -839,13 +839,14 @@ fn resample(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> 
 /// [`resample`] where both axes grow ([`FrameParams::upscale`]: pins too
 /// close for the detector): linear interpolation, across each input row
 /// first (weights in 1/4096ths, kept in 1/64ths of a grey level, at most
-/// 255 x 64 in `u16`), then down the rows (1/256ths), so that each input
-/// row is interpolated once. Within about a grey level of the f64 bilinear
-/// value (the proptest). Across is a gather, which the compiler leaves
-/// scalar (6-7 M instructions for 640x480 -> 666x500, about 1 ms, against
-/// 1-3 M for the whole pipeline); with SSSE3 it goes 8 outputs a
-/// `pshufb` pair ([`simd::across_lerp`]), and down the rows 8 outputs
-/// a `pmaddwd` pair ([`simd::down_lerp`]); the scalar paths
+/// 255 x 64 in `u16`), then down the rows (1/256ths): each input row is
+/// interpolated once, and only the two the output row lies between are
+/// kept. Within about a grey level of the f64 bilinear value (the
+/// proptest). Across is a gather, which the compiler leaves scalar (7.1 M
+/// instructions for 640x480 -> 666x500, against 1-3 M for the whole
+/// pipeline; 2.2 M now, BENCHMARKS.md, session 35); with SSSE3 it goes 8
+/// outputs a `pshufb` pair ([`simd::across_lerp`]), and down the rows 8
+/// outputs a `pmaddwd` pair ([`simd::down_lerp`]); the scalar paths
 /// ([`across_lerp`], [`down_lerp`]) compute the same integers.
 fn magnify(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
     let [rx, ry, rw, rh] = rect;
@@ -859,8 +860,8 @@ fn magnify(src: &GreyFrame, rect: [usize; 4], ow: usize, oh: usize) -> Vec<u8> {
         let done = simd::across_lerp(&plan, &src.data[start..], out);
         across_lerp(&src.data[start..start + rw], &across, done, out);
     };
-    // The two input rows the current output row lies between, each
-    // interpolated across once (the rows' first sample never decreases).
+    // The two input rows the current output row lies between (the first
+    // never decreases as the output row goes down).
     let (mut ra, mut rb) = ((usize::MAX, vec![0u16; ow]), (usize::MAX, vec![0u16; ow]));
     let mut out = vec![0u8; ow * oh];
     for (y, o) in out.chunks_exact_mut(ow).enumerate() {
@@ -1187,10 +1188,9 @@ mod tests {
             rx in 0usize..4,
         ) {
             let rw = w.saturating_sub(rx).max(1);
-            let rx = w - rw;
+            let (rx, ow) = (w - rw, ow.max(rw + 1));
             let frame = GreyFrame::new(w, h, pixels).unwrap();
-            let got = magnify(&frame, [rx, 0, rw, h], ow.max(rw + 1), oh);
-            let ow = ow.max(rw + 1);
+            let got = magnify(&frame, [rx, 0, rw, h], ow, oh);
             let across = Taps::linear(rw, ow, AREA_ONE_ACROSS);
             let down = Taps::linear(h, oh, AREA_ONE_DOWN);
             let mut rows = vec![0u16; h * ow];
