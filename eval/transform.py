@@ -24,8 +24,9 @@ with, in this order:
   changed after the rest was taken);
 - ``--gain G``: the frames only multiplied by ``G`` and clipped at 255 (over
   exposure: the pins saturate, more with ``G`` > 1);
-- ``--motion PX``: the frames only smeared along a line of ``PX`` px at
-  30 degrees (a tap faster than the shutter: motion blur, not a PSF);
+- ``--motion PX``: the frames only smeared along a line of ``PX`` px
+  (rounded to an odd length) at 30 degrees, as ``render_stress.py``'s
+  ``motion6`` (a tap faster than the shutter: motion blur, not a PSF);
 - ``--jpeg Q``: written as JPEG of quality ``Q`` (a camera's MJPEG stream),
   with ``rest.png`` a link to ``rest.jpg`` so that ``render_eval.py`` runs as
   on the PNG frames.
@@ -41,10 +42,14 @@ import argparse
 import math
 import os
 import shutil
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from render_stress import after_camera  # noqa: E402
 
 
 def lens_maps(w: int, h: int, k: float) -> tuple[np.ndarray, np.ndarray]:
@@ -81,21 +86,18 @@ def geometry(img: np.ndarray, a: argparse.Namespace) -> np.ndarray:
 
 
 def exposure(img: np.ndarray, a: argparse.Namespace) -> np.ndarray:
-    """The frame-only conditions (the rest keeps the renderer's)."""
+    """The frame-only conditions (the rest keeps the renderer's): the
+    motion blur and the tone curve of ``render_stress.py``'s ``motion6`` and
+    ``gamma0.6``, then the gain."""
+    cond: dict = {}
     if a.motion:
-        n = max(1, int(round(a.motion)))
-        k = np.zeros((n + 2, n + 2), np.float32)
-        c = (n + 1) / 2
-        for t in np.linspace(-n / 2, n / 2, 4 * n + 1):
-            x, y = c + t * math.cos(math.radians(30)), c - t * math.sin(math.radians(30))
-            k[int(round(y)), int(round(x))] += 1
-        img = cv2.filter2D(img, -1, k / k.sum(), borderType=cv2.BORDER_REFLECT)
-    f = img.astype(np.float64)
+        cond.update(motion_px=a.motion, motion_deg=30.0)
     if a.gamma != 1.0:
-        f = 255.0 * (f / 255.0) ** a.gamma
+        cond["gamma"] = a.gamma
+    img = after_camera(img, cond, np.random.default_rng(0))
     if a.gain != 1.0:
-        f = f * a.gain
-    return np.clip(np.rint(f), 0, 255).astype(np.uint8)
+        img = np.clip(np.rint(img.astype(np.float64) * a.gain), 0, 255).astype(np.uint8)
+    return img
 
 
 def transform(img: np.ndarray, scale: float, pad_width: int | None) -> tuple[np.ndarray, int]:
