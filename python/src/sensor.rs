@@ -59,7 +59,7 @@ impl Sensor {
             work_height_px: h as u32,
             crop_px: None,
             keep_aspect: false,
-            upscale: 1.0,
+            upscale: Some(1.0),
             ..params.frame.clone()
         };
         let cal = calibrate::calibrate(&rest, &params).map_err(calibration_error)?;

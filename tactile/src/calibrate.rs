@@ -189,17 +189,20 @@ pub const NATIVE_SNAP: f64 = 1.25;
 /// all of it) at its own size is at most [`NATIVE_SNAP`] times that (the
 /// fit to the working size shrank a wide frame), the working frame is the
 /// region at its own size: nothing is resampled. `None` when the pins are
-/// far enough apart, or the pitch is unknown.
+/// far enough apart, the pitch is unknown, or `frame` fixes the
+/// magnification (`upscale` set).
 pub fn upscale_for(
     cal: &Calibration,
     frame: &FrameParams,
     input_px: (usize, usize),
 ) -> Option<FrameParams> {
     let pitch_px = cal.pitch_px;
-    if !(pitch_px.is_finite() && pitch_px > 0.0 && pitch_px < MIN_WORKING_PITCH_PX) {
+    if frame.upscale.is_some()
+        || !(pitch_px.is_finite() && pitch_px > 0.0 && pitch_px < MIN_WORKING_PITCH_PX)
+    {
         return None;
     }
-    let mut upscale = (frame.upscale * MIN_WORKING_PITCH_PX / pitch_px).min(MAX_UPSCALE);
+    let mut upscale = (MIN_WORKING_PITCH_PX / pitch_px).min(MAX_UPSCALE);
     // The region's own size as a magnification of the fitted one.
     let (region_w, region_h) = frame
         .crop_px
@@ -208,7 +211,7 @@ pub fn upscale_for(
         region_w,
         region_h,
         &FrameParams {
-            upscale: 1.0,
+            upscale: None,
             ..frame.clone()
         },
     );
@@ -222,9 +225,9 @@ pub fn upscale_for(
     {
         upscale = native;
     }
-    (upscale > frame.upscale).then(|| FrameParams {
-        upscale,
-        mm_per_px: frame.mm_per_px * frame.upscale / upscale,
+    (upscale > 1.0).then(|| FrameParams {
+        upscale: Some(upscale),
+        mm_per_px: frame.mm_per_px / upscale,
         ..frame.clone()
     })
 }
@@ -1221,8 +1224,17 @@ mod tests {
         let finer =
             upscale_for(&small, &half, (640, 480)).expect("pins closer than the detector's pitch");
         let gain = MIN_WORKING_PITCH_PX / small.pitch_px;
-        assert!((finer.upscale - gain).abs() < 1e-9, "{finer:?}");
-        assert!((finer.mm_per_px * finer.upscale - half.mm_per_px).abs() < 1e-12);
+        let up = |f: &FrameParams| f.upscale.expect("a magnification");
+        assert!((up(&finer) - gain).abs() < 1e-9, "{finer:?}");
+        assert!((finer.mm_per_px * up(&finer) - half.mm_per_px).abs() < 1e-12);
+        // A magnification the config fixes is left as it is, 1 included.
+        for fixed in [1.0, 1.2] {
+            let set = FrameParams {
+                upscale: Some(fixed),
+                ..half.clone()
+            };
+            assert!(upscale_for(&small, &set, (640, 480)).is_none());
+        }
         let magnified = at(&finer);
         assert!(
             (magnified.pitch_px / MIN_WORKING_PITCH_PX - 1.0).abs() < 0.05,
@@ -1238,7 +1250,7 @@ mod tests {
         let wide = upscale_for(&small, &default, (1000, 480)).unwrap();
         assert_eq!(crate::frame::working_size(1000, 480, &wide), (1000, 480));
         let wider = upscale_for(&small, &default, (1400, 480)).unwrap();
-        assert!((wider.upscale - gain).abs() < 1e-9, "{wider:?}");
+        assert!((up(&wider) - gain).abs() < 1e-9, "{wider:?}");
         // Never past MAX_UPSCALE, even to take a frame at its own size.
         let narrow = FrameParams {
             work_width_px: 16,
@@ -1250,8 +1262,8 @@ mod tests {
             ..small.clone()
         };
         let most = upscale_for(&tiny_pins, &narrow, (140, 140)).unwrap();
-        assert!(most.upscale <= MAX_UPSCALE, "{most:?}");
-        assert!((most.mm_per_px * most.upscale - narrow.mm_per_px).abs() < 1e-12);
+        assert!(up(&most) <= MAX_UPSCALE, "{most:?}");
+        assert!((most.mm_per_px * up(&most) - narrow.mm_per_px).abs() < 1e-12);
     }
 
     #[test]

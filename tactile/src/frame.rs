@@ -330,7 +330,10 @@ pub fn map_for(width: usize, height: usize, params: &FrameParams) -> WorkToInput
 /// information, only pixels to search); then times
 /// [`FrameParams::upscale`] (pins too small for the detector).
 pub fn working_size(cw: usize, ch: usize, params: &FrameParams) -> (usize, usize) {
-    let up = params.upscale.clamp(1.0, crate::params::MAX_UPSCALE);
+    let up = params
+        .upscale
+        .unwrap_or(1.0)
+        .clamp(1.0, crate::params::MAX_UPSCALE);
     let times = |v: usize| (v as f64 * up).round() as usize;
     let (ow, oh) = (
         params.work_width_px as usize,
@@ -1240,7 +1243,7 @@ mod tests {
         let data: Vec<u8> = (0..12).map(|v| v * 20).collect();
         let raw = grey_raw(4, 3, &data);
         let up = FrameParams {
-            upscale: 2.0,
+            upscale: Some(2.0),
             ..params(640, 480)
         };
         let p = prepare(&raw, &up).unwrap();
@@ -1256,7 +1259,7 @@ mod tests {
                 1280,
                 960,
                 &FrameParams {
-                    upscale: 1.5,
+                    upscale: Some(1.5),
                     ..FrameParams::default()
                 }
             ),

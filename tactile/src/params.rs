@@ -148,9 +148,12 @@ pub struct FrameParams {
     /// (linear interpolation): for pins too small for the detector, about
     /// [`crate::calibrate::MIN_WORKING_PITCH_PX`] apart or less (a 320x240
     /// camera on a dense TacTip). `mm_per_px` is per working pixel, after
-    /// it. `dexitac analyze` picks it itself when the rest's pins are that
-    /// close ([`crate::calibrate::upscale_for`]).
-    pub upscale: f64,
+    /// it. Unset (`None`, the default): `dexitac analyze` and the Python
+    /// package pick it when the rest's pins are that close
+    /// ([`crate::calibrate::upscale_for`]), and the camera loop works at 1;
+    /// set, it is fixed (1: never magnify, the faster frame; BENCHMARKS.md,
+    /// session 35, for what the magnification buys).
+    pub upscale: Option<f64>,
 }
 
 /// How a colour frame becomes grey ([`crate::frame::to_grey`]).
@@ -178,7 +181,7 @@ impl Default for FrameParams {
             mm_per_px: MM_PER_PX,
             keep_aspect: true,
             grey: Grey::default(),
-            upscale: 1.0,
+            upscale: None,
         }
     }
 }
@@ -400,12 +403,14 @@ impl Params {
             (16..=8192).contains(&f.work_height_px),
             "must be 16..=8192",
         )?;
-        check(
-            "frame.upscale",
-            f.upscale,
-            (1.0..=MAX_UPSCALE).contains(&f.upscale),
-            "must be 1..=8",
-        )?;
+        if let Some(up) = f.upscale {
+            check(
+                "frame.upscale",
+                up,
+                (1.0..=MAX_UPSCALE).contains(&up),
+                "must be 1..=8",
+            )?;
+        }
         if let Some(c) = f.crop_px {
             check(
                 "frame.crop_px",
@@ -598,7 +603,8 @@ mod tests {
             );
         }
         let p = Params::from_toml_str("[frame]\nupscale = 2.5\n").unwrap();
-        assert_eq!(p.frame.upscale, 2.5);
+        assert_eq!(p.frame.upscale, Some(2.5));
+        assert_eq!(Params::from_toml_str("").unwrap().frame.upscale, None);
     }
 
     #[test]

@@ -167,9 +167,9 @@ fn run_inner(args: &AnalyzeArgs) -> anyhow::Result<usize> {
     if let Some(finer) = calibrate::upscale_for(&cal, &params.frame, rest_size) {
         tracing::info!(
             "the rest's pins are {:.1} px apart, too close for the detector: working frame \
-             magnified {:.2}x (set [frame] upscale to choose)",
+             magnified {:.2}x (set [frame] upscale to fix it; 1 never magnifies)",
             cal.pitch_px,
-            finer.upscale
+            finer.upscale.unwrap_or(1.0)
         );
         params.frame = finer;
         (cal, rest_size) = calibrate_rest(args, &params, &files)?;

@@ -234,7 +234,7 @@ pub fn calibrated(
                 s.label,
                 cal.pitch_px,
                 calibrate::MIN_WORKING_PITCH_PX,
-                finer.upscale,
+                finer.upscale.unwrap_or(1.0),
                 finer.mm_per_px
             );
         }
