@@ -7,26 +7,26 @@
 Copies every category of ``DIR`` (from ``render.py --out DIR``) to ``OUT``
 with, in this order:
 
-- ``--scale S``: every frame and rest resized by ``S`` with OpenCV
-  (``INTER_AREA`` down, ``INTER_LINEAR`` up), the truth centres mapped
-  (pixel centres kept: ``x' = (x + 0.5) S - 0.5``): a camera of another
-  resolution;
-- ``--pad-width W``: the frame centred in a ``W`` px wide frame of dark grey
-  (a 16:9 camera on a 4:3 sensor), the truth shifted;
 - ``--rotate DEG``: rest and frames rotated by ``DEG`` degrees
   (anticlockwise in the image) about the frame's centre, the corners filled
   with dark grey (a camera mounted turned on its sensor), the truth rotated;
 - ``--barrel K``: rest and frames warped by the radial lens distortion
   ``r_d = r (1 + K (r / r_max)^2)`` (``r_max`` the half-diagonal; ``K < 0``
   barrel, as a wide-angle lens), the truth mapped the same way;
+- ``--motion PX``: the frames only smeared along a line of ``PX`` px
+  (rounded to an odd length) at 30 degrees, as ``render_stress.py``'s
+  ``motion6`` (a tap faster than the shutter: motion blur, not a PSF);
 - ``--gamma G``: the frames only (not the rest) mapped by
   ``255 (v / 255)^G`` per channel (a camera whose auto exposure or gamma
   changed after the rest was taken);
 - ``--gain G``: the frames only multiplied by ``G`` and clipped at 255 (over
   exposure: the pins saturate, more with ``G`` > 1);
-- ``--motion PX``: the frames only smeared along a line of ``PX`` px
-  (rounded to an odd length) at 30 degrees, as ``render_stress.py``'s
-  ``motion6`` (a tap faster than the shutter: motion blur, not a PSF);
+- ``--scale S``: every frame and rest resized by ``S`` with OpenCV
+  (``INTER_AREA`` down, ``INTER_LINEAR`` up), the truth centres mapped
+  (pixel centres kept: ``x' = (x + 0.5) S - 0.5``): a camera of another
+  resolution;
+- ``--pad-width W``: the frame centred in a ``W`` px wide frame of dark grey
+  (a 16:9 camera on a 4:3 sensor), the truth shifted;
 - ``--jpeg Q``: written as JPEG of quality ``Q`` (a camera's MJPEG stream),
   with ``rest.png`` a link to ``rest.jpg`` so that ``render_eval.py`` runs as
   on the PNG frames.
