@@ -362,7 +362,8 @@ fn better(c: &TuneResult, best: Option<&TuneResult>) -> bool {
 }
 
 /// Writes `params` as a sensor TOML that `dexitac analyze --config` reads
-/// back to the same parameters.
+/// back to the same parameters (a mask image itself is not written, only
+/// its path: `Params::area_mask` is read from it).
 pub fn params_toml(params: &Params, header: &str) -> String {
     let f = &params.frame;
     let m = &params.markers;
@@ -379,6 +380,15 @@ pub fn params_toml(params: &Params, header: &str) -> String {
         out.push_str(&format!("crop_px = [{x}, {y}, {w}, {h}]\n"));
     }
     out.push_str(&format!("mm_per_px = {:?}\n", f.mm_per_px));
+    out.push_str(&format!("keep_aspect = {}\n", f.keep_aspect));
+    let grey = match f.grey {
+        crate::params::Grey::Max => "max",
+        crate::params::Grey::Luma => "luma",
+    };
+    out.push_str(&format!("grey = \"{grey}\"\n"));
+    if let Some(up) = f.upscale {
+        out.push_str(&format!("upscale = {up:?}\n"));
+    }
     out.push_str("\n[markers]\n");
     if let Some(l) = m.lobe_px {
         out.push_str(&format!("lobe_px = {l}\n"));
@@ -388,6 +398,14 @@ pub fn params_toml(params: &Params, header: &str) -> String {
     }
     out.push_str(&format!("strength_ratio = {:?}\n", m.strength_ratio));
     out.push_str(&format!("min_contrast = {:?}\n", m.min_contrast));
+    let polarity = match m.polarity {
+        crate::params::Polarity::Auto => "auto",
+        crate::params::Polarity::Bright => "bright",
+        crate::params::Polarity::Dark => "dark",
+    };
+    out.push_str(&format!("polarity = \"{polarity}\"\n"));
+    out.push_str(&format!("follow = {}\n", m.follow));
+    out.push_str(&format!("local_search = {}\n", m.local_search));
     out.push_str("\n[density]\n");
     out.push_str(&format!("kernel_width_px = {:?}\n", d.kernel_width_px));
     let mode = match d.mode {
@@ -397,6 +415,11 @@ pub fn params_toml(params: &Params, header: &str) -> String {
     out.push_str(&format!("mode = \"{mode}\"\n"));
     out.push_str(&format!("grid_step_px = {}\n", d.grid_step_px));
     out.push_str(&format!("truncate_sigmas = {:?}\n", d.truncate_sigmas));
+    let kernel = match d.kernel {
+        crate::params::DensityKernel::Image => "image",
+        crate::params::DensityKernel::Skin => "skin",
+    };
+    out.push_str(&format!("kernel = \"{kernel}\"\n"));
     out.push_str("\n[contact]\n");
     let threshold = match c.threshold {
         crate::params::ThresholdMode::Relative => "relative",
@@ -420,7 +443,76 @@ pub fn params_toml(params: &Params, header: &str) -> String {
     out.push_str(&format!("centre = \"{centre}\"\n"));
     out.push_str(&format!("skip_unmoved = {}\n", c.skip_unmoved));
     out.push_str(&format!("move_noise_px = {:?}\n", c.move_noise_px));
+    out.push_str(&format!("move_noise_sigmas = {:?}\n", c.move_noise_sigmas));
     out.push_str(&format!("min_moved_markers = {}\n", c.min_moved_markers));
+    out.push_str(&area_toml(&params.area));
+    out.push_str(&surface_toml(&params.surface));
+    out
+}
+
+/// The `[area]` table of [`params_toml`] (none for the automatic area). A
+/// mask's path is written as the base config gave it: relative to that
+/// config's folder.
+fn area_toml(area: &crate::area::AreaSpec) -> String {
+    use crate::area::AreaSpec;
+    let pair = |p: [f64; 2]| format!("[{:?}, {:?}]", p[0], p[1]);
+    let body = match area {
+        AreaSpec::Auto => return String::new(),
+        AreaSpec::Whole => "shape = \"whole\"\n".to_string(),
+        AreaSpec::Circle {
+            centre_px,
+            radius_px,
+        } => format!(
+            "shape = \"circle\"\ncentre_px = {}\nradius_px = {radius_px:?}\n",
+            pair(*centre_px)
+        ),
+        AreaSpec::RoundedRect {
+            rect_px: [x, y, w, h],
+            corner_radius_px,
+        } => format!(
+            "shape = \"rounded_rect\"\nrect_px = [{x:?}, {y:?}, {w:?}, {h:?}]\n\
+             corner_radius_px = {corner_radius_px:?}\n"
+        ),
+        AreaSpec::Polygon { points_px } => {
+            let points: Vec<String> = points_px.iter().map(|&p| pair(p)).collect();
+            format!("shape = \"polygon\"\npoints_px = [{}]\n", points.join(", "))
+        }
+        AreaSpec::Mask { path } => format!(
+            "shape = \"mask\"\npath = {}\n",
+            toml_string(&path.to_string_lossy())
+        ),
+    };
+    format!("\n[area]\n{body}")
+}
+
+/// The `[surface]` table of [`params_toml`] (none for the automatic
+/// surface).
+fn surface_toml(surface: &crate::surface::SurfaceSpec) -> String {
+    use crate::surface::SurfaceSpec;
+    match surface {
+        SurfaceSpec::Auto => String::new(),
+        SurfaceSpec::Flat => "\n[surface]\nshape = \"flat\"\n".to_string(),
+        SurfaceSpec::Dome {
+            centre_px: [x, y],
+            radius_px,
+        } => format!(
+            "\n[surface]\nshape = \"dome\"\ncentre_px = [{x:?}, {y:?}]\nradius_px = {radius_px:?}\n"
+        ),
+    }
+}
+
+/// `s` as a TOML basic string.
+fn toml_string(s: &str) -> String {
+    let mut out = String::from("\"");
+    for c in s.chars() {
+        match c {
+            '"' => out.push_str("\\\""),
+            '\\' => out.push_str("\\\\"),
+            c if c.is_control() => out.push_str(&format!("\\u{:04X}", c as u32)),
+            c => out.push(c),
+        }
+    }
+    out.push('"');
     out
 }
 
@@ -962,8 +1054,44 @@ mod tests {
         p.markers.min_contrast = 4.0;
         p.frame.crop_px = Some([10, 20, 600, 440]);
         p.markers.binned = Some(false);
+        p.frame.keep_aspect = false;
+        p.frame.grey = crate::params::Grey::Luma;
+        p.frame.upscale = Some(1.5);
+        p.markers.polarity = crate::params::Polarity::Dark;
+        p.markers.follow = false;
+        p.markers.local_search = false;
+        p.density.kernel = crate::params::DensityKernel::Skin;
+        p.contact.move_noise_sigmas = 5.0;
+        p.surface = crate::surface::SurfaceSpec::Dome {
+            centre_px: [320.5, 240.0],
+            radius_px: 264.0,
+        };
         let text = params_toml(&p, "tuned by a test\nsecond line");
         assert_eq!(Params::from_toml_str(&text).unwrap(), p, "{text}");
+        // Every sensing area and a flat skin.
+        use crate::area::AreaSpec;
+        for area in [
+            AreaSpec::Whole,
+            AreaSpec::Circle {
+                centre_px: [320.0, 240.5],
+                radius_px: 200.0,
+            },
+            AreaSpec::RoundedRect {
+                rect_px: [100.0, 60.0, 440.0, 360.0],
+                corner_radius_px: 40.0,
+            },
+            AreaSpec::Polygon {
+                points_px: vec![[100.0, 60.0], [540.0, 60.0], [320.0, 420.0]],
+            },
+            AreaSpec::Mask {
+                path: "masks/a \"b\" \\ c.png".into(),
+            },
+        ] {
+            p.area = area;
+            p.surface = crate::surface::SurfaceSpec::Flat;
+            let text = params_toml(&p, "");
+            assert_eq!(Params::from_toml_str(&text).unwrap(), p, "{text}");
+        }
         let d = Params::default();
         assert_eq!(Params::from_toml_str(&params_toml(&d, "")).unwrap(), d);
     }
