@@ -455,7 +455,6 @@ pub fn params_toml(params: &Params, header: &str) -> String {
 /// config's folder.
 fn area_toml(area: &crate::area::AreaSpec) -> String {
     use crate::area::AreaSpec;
-    let pair = |p: [f64; 2]| format!("[{:?}, {:?}]", p[0], p[1]);
     let body = match area {
         AreaSpec::Auto => return String::new(),
         AreaSpec::Whole => "shape = \"whole\"\n".to_string(),
@@ -464,7 +463,7 @@ fn area_toml(area: &crate::area::AreaSpec) -> String {
             radius_px,
         } => format!(
             "shape = \"circle\"\ncentre_px = {}\nradius_px = {radius_px:?}\n",
-            pair(*centre_px)
+            toml_pair(*centre_px)
         ),
         AreaSpec::RoundedRect {
             rect_px: [x, y, w, h],
@@ -474,7 +473,7 @@ fn area_toml(area: &crate::area::AreaSpec) -> String {
              corner_radius_px = {corner_radius_px:?}\n"
         ),
         AreaSpec::Polygon { points_px } => {
-            let points: Vec<String> = points_px.iter().map(|&p| pair(p)).collect();
+            let points: Vec<String> = points_px.iter().map(|&p| toml_pair(p)).collect();
             format!("shape = \"polygon\"\npoints_px = [{}]\n", points.join(", "))
         }
         AreaSpec::Mask { path } => format!(
@@ -493,12 +492,18 @@ fn surface_toml(surface: &crate::surface::SurfaceSpec) -> String {
         SurfaceSpec::Auto => String::new(),
         SurfaceSpec::Flat => "\n[surface]\nshape = \"flat\"\n".to_string(),
         SurfaceSpec::Dome {
-            centre_px: [x, y],
+            centre_px,
             radius_px,
         } => format!(
-            "\n[surface]\nshape = \"dome\"\ncentre_px = [{x:?}, {y:?}]\nradius_px = {radius_px:?}\n"
+            "\n[surface]\nshape = \"dome\"\ncentre_px = {}\nradius_px = {radius_px:?}\n",
+            toml_pair(*centre_px)
         ),
     }
+}
+
+/// A point `[x, y]` as a TOML array.
+fn toml_pair([x, y]: [f64; 2]) -> String {
+    format!("[{x:?}, {y:?}]")
 }
 
 /// `s` as a TOML basic string.
