@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """How many of the renderer's true pins around a press dexitac finds.
 
-    python eval/pin_recall.py --dexitac PATH [--frames DIR] [--stress DIR]
+    python eval/pin_recall.py --dexitac PATH [--frames DIR] [--stress DIR [--paired]]
         [--seed 1] [--near-px 80] [--match-px 2]
 
 ``--frames``: ``render.py``'s ``--out`` folder (its categories);
-``--stress``: a folder ``render_stress.py --keep`` wrote (its conditions).
+``--stress``: a folder ``render_stress.py --keep`` wrote (its conditions;
+``--paired`` when it was written with ``--paired``).
 ``dexitac analyze --markers-out`` runs on each, and for every contact frame
 the renderer's pins (``render.py``'s ``pins``, from the same seeds) and
 dexitac's markers within ``--near-px`` of the truth centre are matched one
@@ -55,11 +56,17 @@ def score(dexitac: str, folder: Path, contacts, sensor, near_px: float, match_px
              "--markers-out", str(out), *map(str, frames)],
             check=True,
         )
+        with (folder / "truth.csv").open() as f:
+            rows = {r["frame"]: r for r in csv.DictReader(f)}
         for i, _, contact in contacts(len(frames)):
             if contact is None:
                 continue
             n += 1
             pins, *_, truth = R.pins(sensor, contact)
+            row = rows.get(frames[i].stem)
+            if row is None or np.hypot(float(row["cx"]) - truth[0], float(row["cy"]) - truth[1]) > 1e-3:
+                sys.exit(f"{folder}: frame {frames[i].stem} is not the contact these options draw; "
+                         "give the --seed (and --paired) the frames were rendered with")
             pins = pins[R.in_frame(pins)]
             with open(out / f"{frames[i].stem}.csv") as f:
                 markers = np.array([[float(r["x"]), float(r["y"])] for r in csv.DictReader(f)]).reshape(-1, 2)
@@ -75,6 +82,7 @@ def main() -> int:
     ap.add_argument("--frames", type=Path, help="render.py's --out folder")
     ap.add_argument("--stress", type=Path, help="a folder render_stress.py --keep wrote")
     ap.add_argument("--seed", type=int, default=1, help="the seed the frames were rendered with")
+    ap.add_argument("--paired", action="store_true", help="the --stress frames were written with render_stress.py --paired")
     ap.add_argument("--near-px", type=float, default=80.0, help="pins and markers this near the truth centre count")
     ap.add_argument("--match-px", type=float, default=2.0, help="a pin is found by a marker this near it")
     a = ap.parse_args()
@@ -90,7 +98,7 @@ def main() -> int:
         for name in RS.CONDITIONS:
             if (a.stress / name / "frames").is_dir():
                 sets.append((name, a.stress / name, sensor,
-                             lambda k, name=name: RS.condition_contacts(name, sensor, a.seed, k)))
+                             lambda k, name=name: RS.condition_contacts(name, sensor, a.seed, k, a.paired)))
     if not sets:
         ap.error("no frames: give --frames and/or --stress with the folders render.py / render_stress.py wrote")
     print(f"| frames | contact frames | pins within {a.near_px:g} px | found | missed | markers off every pin |")

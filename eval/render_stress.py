@@ -43,6 +43,19 @@ Then what the camera or its driver does to a frame after the renderer
 - ``none``: ``NOMINAL`` as it is (contacts drawn as in every condition,
   from its own seeds: the row to compare the others with).
 
+``--paired``: every condition draws frame ``i``'s contact and noise from
+one generator, so that frame ``i`` holds the same contact in every
+condition and the rows differ by the condition alone (without it each
+condition draws its own contacts, and with a dozen contacts a row moves by
+their sampling as much as by its condition). A second table then compares
+dexitac's displacement field (``analyze --field-out``) with the renderer's
+true pins, as ``match_quality.py`` does: of the pins a contact moved more
+than 3 px, the share of rest markers found at their own pin, another pin,
+no pin or lost; and, over every frame, how far the markers of the pins
+that did not move (under 0.05 px: the contact-free frames' and those far
+from a contact) appear to move (the false displacement a condition makes, px; under
+``shift1.5`` it is the shift itself).
+
 Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR, in
 ``render.py``'s layout, ``<condition>/{rest.png,frames/,truth.csv}``, with
 dexitac's ``dexitac_default.csv``, kept). Writes
@@ -55,14 +68,17 @@ import argparse
 import csv
 import datetime as dt
 import math
+import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import match_quality as MQ  # noqa: E402
 import render as R  # noqa: E402
 import render_eval as E  # noqa: E402
 from run import run_dexitac  # noqa: E402
@@ -113,12 +129,34 @@ def after_camera(img: np.ndarray, cond: dict, rng: np.random.Generator) -> np.nd
     return img
 
 
-def condition_contacts(name: str, sensor, seed: int, k: int):
+def condition_contacts(name: str, sensor, seed: int, k: int, paired: bool = False):
     """Per frame of a condition: its index, its generator (the frame's noise
-    comes next) and its contact (every odd frame, drawn as in ``nominal``)."""
+    comes next) and its contact (every odd frame, drawn as in ``nominal``);
+    ``paired``: the same generators for every condition."""
+    key = 4000 if paired else 3000 + list(CONDITIONS).index(name)
     for i in range(k):
-        rng = np.random.default_rng([seed, 3000 + list(CONDITIONS).index(name), i])
+        rng = np.random.default_rng([seed, key, i])
         yield i, rng, (R.sample_contact("nominal", sensor, rng) if i % 2 else None)
+
+
+STILL_PX = 0.05  # a pin that moved less than this is still (``--paired``)
+
+
+def pin_scores(field: Path, frames: list[tuple[str, np.ndarray]], pins_rest: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Over ``frames`` (name, true pins in that frame): the counts of
+    ``match_quality.KINDS`` among the pins moved more than
+    ``match_quality.MOVED_PX``, and the false displacements (px) of the rest
+    markers whose pin moved less than ``STILL_PX``."""
+    moved = np.zeros(len(MQ.KINDS), int)
+    still: list[np.ndarray] = []
+    for name, pins_now in frames:
+        rest, now = MQ.read_field(field / f"{name}.csv")
+        moved += MQ.score(rest, now, pins_rest, pins_now)["moved"]
+        d0, pin = cKDTree(pins_rest).query(rest)
+        true_move = pins_now[pin] - pins_rest[pin]
+        sel = (d0 <= MQ.SAME_PIN_PX) & np.isfinite(now[:, 0]) & (np.hypot(*true_move.T) < STILL_PX)
+        still.append(np.hypot(*(now[sel] - rest[sel] - true_move[sel]).T))
+    return moved, np.concatenate(still) if still else np.zeros(0)
 
 
 def main() -> int:
@@ -130,6 +168,7 @@ def main() -> int:
     ap.add_argument("--out", default="eval/results")
     ap.add_argument("--date", default=dt.date.today().isoformat())
     ap.add_argument("--keep", help="write the frames, truth and dexitac's CSVs to this folder (kept)")
+    ap.add_argument("--paired", action="store_true", help="the same contacts in every condition, and the true pins' table")
     a = ap.parse_args()
     sensor = R.sensor_of("nominal", a.seed)
     scene = R.Scene(sensor)
@@ -143,6 +182,7 @@ def main() -> int:
         "",
         *E.TABLE_HEAD,
     ]
+    pin_lines: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(a.keep or tmp)
         for name in a.conditions:
@@ -151,7 +191,10 @@ def main() -> int:
             (d / "frames").mkdir(parents=True, exist_ok=True)
             R.write_png(d / "rest.png", rest)
             truth = []
-            for i, rng, contact in condition_contacts(name, sensor, a.seed, a.frames_per_condition):
+            pressed = []
+            for i, rng, contact in condition_contacts(name, sensor, a.seed, a.frames_per_condition, a.paired):
+                if a.paired:
+                    pressed.append((f"{i:04d}", R.pins(sensor, contact)[0]))
                 img, centre, n_vis = scene.render(contact, cond, rng)
                 img = after_camera(img, cond, rng)
                 if centre is not None and "shift_px" in cond:
@@ -169,6 +212,29 @@ def main() -> int:
             pred = {r["frame"]: r for r in rows}
             lines.append(E.row(name, E.score([(t, pred.get(t["frame"])) for t in truth])))
             print(lines[-1], flush=True)
+            if a.paired:
+                field = d / "field"
+                subprocess.run(
+                    [a.dexitac, "analyze", "-q", "--rest", str(d / "rest.png"), "--out", str(d / "field.csv"),
+                     "--field-out", str(field), str(d / "frames")],
+                    check=True,
+                )
+                moved, still = pin_scores(field, pressed, scene.rest_xy)
+                shares = " | ".join(f"{100 * v / max(moved.sum(), 1):.1f} %" for v in moved)
+                pin_lines.append(
+                    f"| {name} | {moved.sum()} | {shares} | {np.median(still):.3f} / {np.percentile(still, 95):.3f} |"
+                )
+    if a.paired:
+        lines += [
+            "",
+            "The same frames against the renderer's true pins (`--paired`):",
+            "",
+            "| condition | pins moved > 3 px | at their own pin | at another pin | at no pin | lost "
+            f"| still pins (< {STILL_PX} px): false move median / p95 px |",
+            "|---|---|---|---|---|---|---|",
+            *pin_lines,
+        ]
+        print("\n".join(lines[-len(pin_lines) - 5 :]))
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / f"{a.date}-render-stress.md").write_text("\n".join(lines) + "\n")
