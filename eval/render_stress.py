@@ -53,8 +53,8 @@ true pins, as ``match_quality.py`` does: of the pins a contact moved more
 than 3 px, the share of rest markers found at their own pin, another pin,
 no pin or lost; and, over every frame, how far the markers of the pins
 that did not move (under 0.05 px: the contact-free frames' and those far
-from a contact) appear to move (the false displacement a condition makes, px; under
-``shift1.5`` it is the shift itself).
+from a contact) appear to move (the false displacement a condition makes,
+px; under ``shift1.5`` it is the shift itself).
 
 Frames go to a temporary folder and are deleted (``--keep DIR``: to DIR, in
 ``render.py``'s layout, ``<condition>/{rest.png,frames/,truth.csv}``, with
