@@ -960,17 +960,17 @@ fn small_contact(t: &TrackedMarkers, seed: usize) -> Option<Contact> {
     Some(tracking_contact(fit.centre, median(&d)?, t.mm_per_px))
 }
 
-/// [`small_contact`]'s centre must lie inside the marker lattice: the rest
-/// markers within this many pitches of it leave no gap of more than a
-/// half-turn around it ([`inside_lattice`]). Lines that meet beyond the
-/// lattice's last markers are seen from one side, and there a single
-/// marker's move places the centre. Measured (BENCHMARKS.md, session 36):
-/// under 5 px of motion blur three outer-ring markers of the other
-/// renderer's dome, each pulled 2.6-2.8 px towards its inner neighbour by
-/// that neighbour's smear, made three false contacts in 60 contact-free
-/// frames, centred where the largest gap around them was 190-231 degrees;
-/// the tracked-only contacts of the renderer's contact frames (seed 2, with
-/// and without parallax) had at most 75 degrees.
+/// A small contact's centre (the tracked-only rule of [`locate`] for tiny
+/// presses) must lie inside the marker lattice: the rest markers within
+/// this many pitches of it leave no gap of more than a half-turn around it.
+/// Lines that meet beyond the lattice's last markers are seen from one
+/// side, and there a single marker's move places the centre. Measured
+/// (BENCHMARKS.md, session 36): under 5 px of motion blur three outer-ring
+/// markers of the other renderer's dome, each pulled 2.6-2.8 px towards its
+/// inner neighbour by that neighbour's smear, made three false contacts in
+/// 60 contact-free frames, centred where the largest gap around them was
+/// 190-231 degrees; the 49 tracked centres of the renderer's contact frames
+/// (seed 2, with and without parallax) had at most 75 degrees.
 pub const SMALL_LATTICE_PITCHES: f64 = 2.0;
 
 /// True when the points of `rest` within `reach_px` of `c` (other than one
