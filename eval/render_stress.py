@@ -68,7 +68,6 @@ import argparse
 import csv
 import datetime as dt
 import math
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
@@ -206,19 +205,17 @@ def main() -> int:
                 w = csv.DictWriter(f, fieldnames=list(truth[0]))
                 w.writeheader()
                 w.writerows(truth)
-            rows, _, note = run_dexitac(a.dexitac, d, d / "rest.png", d, "default", None)
+            field = d / "field"
+            more = ("--field-out", str(field)) if a.paired else ()
+            rows, _, note = run_dexitac(a.dexitac, d, d / "rest.png", d, "default", None, more=more)
             if note:
                 print(f"{name}: {note}", file=sys.stderr)
+                if a.paired:
+                    return 1  # no field to score against the true pins
             pred = {r["frame"]: r for r in rows}
             lines.append(E.row(name, E.score([(t, pred.get(t["frame"])) for t in truth])))
             print(lines[-1], flush=True)
             if a.paired:
-                field = d / "field"
-                subprocess.run(
-                    [a.dexitac, "analyze", "-q", "--rest", str(d / "rest.png"), "--out", str(d / "field.csv"),
-                     "--field-out", str(field), str(d / "frames")],
-                    check=True,
-                )
                 moved, still = pin_scores(field, pressed, scene.rest_xy)
                 shares = " | ".join(f"{100 * v / max(moved.sum(), 1):.1f} %" for v in moved)
                 pin_lines.append(

@@ -133,11 +133,13 @@ def pin_pitch(set_name: str, rest: Path) -> float:
 # ---------------------------------------------------------------- tools
 
 def run_dexitac(exe: str, set_dir: Path, rest: Path, out_dir: Path, tag: str,
-                config: Path | None, from_frames: bool = False) -> tuple[list[dict], float, str]:
-    """`from_frames`: dexitac estimates the rest itself (`--rest-from-frames`)."""
+                config: Path | None, from_frames: bool = False,
+                more: tuple[str, ...] = ()) -> tuple[list[dict], float, str]:
+    """`from_frames`: dexitac estimates the rest itself (`--rest-from-frames`);
+    `more`: further `analyze` options (e.g. `--field-out DIR`)."""
     csv_out = out_dir / f"dexitac_{tag}.csv"
     rest_args = ["--rest-from-frames"] if from_frames else ["--rest", str(rest)]
-    cmd = [exe, "analyze", "-q", *rest_args, "--out", str(csv_out)]
+    cmd = [exe, "analyze", "-q", *rest_args, "--out", str(csv_out), *more]
     if config:
         cmd += ["--config", str(config)]
     cmd.append(str(set_dir / "frames"))

@@ -52,11 +52,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from render_stress import after_camera  # noqa: E402
 
 
+def lens_centre(w: int, h: int) -> tuple[float, float, float]:
+    """The distortion's centre (the frame's) and ``r_max`` (the half-diagonal)."""
+    return (w - 1) / 2, (h - 1) / 2, math.hypot(w, h) / 2
+
+
+def rotation(w: int, h: int, deg: float) -> np.ndarray:
+    """The 2x3 matrix of ``--rotate``: anticlockwise about the frame's centre."""
+    return cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), deg, 1.0)
+
+
 def lens_maps(w: int, h: int, k: float) -> tuple[np.ndarray, np.ndarray]:
     """For every output pixel, the input pixel the distortion puts there:
     the inverse of ``r_d = r (1 + k (r / r_max)^2)``, by fixed-point
     iteration (converges for |k| < 0.3)."""
-    cx, cy, rmax = (w - 1) / 2, (h - 1) / 2, math.hypot(w, h) / 2
+    cx, cy, rmax = lens_centre(w, h)
     yd, xd = np.mgrid[0:h, 0:w].astype(np.float64)
     dx, dy = (xd - cx) / rmax, (yd - cy) / rmax
     rd = np.hypot(dx, dy)
@@ -68,7 +78,7 @@ def lens_maps(w: int, h: int, k: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def distort_point(x: float, y: float, w: int, h: int, k: float) -> tuple[float, float]:
-    cx, cy, rmax = (w - 1) / 2, (h - 1) / 2, math.hypot(w, h) / 2
+    cx, cy, rmax = lens_centre(w, h)
     dx, dy = (x - cx) / rmax, (y - cy) / rmax
     f = 1 + k * (dx * dx + dy * dy)
     return cx + dx * f * rmax, cy + dy * f * rmax
@@ -77,8 +87,7 @@ def distort_point(x: float, y: float, w: int, h: int, k: float) -> tuple[float, 
 def geometry(img: np.ndarray, a: argparse.Namespace) -> np.ndarray:
     h, w = img.shape[:2]
     if a.rotate:
-        m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), a.rotate, 1.0)
-        img = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_LINEAR, borderValue=(20, 20, 20))
+        img = cv2.warpAffine(img, rotation(w, h, a.rotate), (w, h), flags=cv2.INTER_LINEAR, borderValue=(20, 20, 20))
     if a.barrel:
         mx, my = lens_maps(w, h, a.barrel)
         img = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderValue=(20, 20, 20))
@@ -155,8 +164,7 @@ def main() -> None:
             if shape is not None and not math.isnan(x):
                 h, w = shape
                 if a.rotate:
-                    m = cv2.getRotationMatrix2D(((w - 1) / 2, (h - 1) / 2), a.rotate, 1.0)
-                    x, y = m @ np.array([x, y, 1.0])
+                    x, y = rotation(w, h, a.rotate) @ np.array([x, y, 1.0])
                 if a.barrel:
                     x, y = distort_point(x, y, w, h, a.barrel)
             p[1] = f"{(x + 0.5) * a.scale - 0.5 + left:.3f}"
