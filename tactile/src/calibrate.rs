@@ -821,7 +821,7 @@ fn reference(
     detector: &Detector,
 ) -> (DensityMap, Vec<bool>, f32) {
     let rest_density = density::estimate(rest_markers, density, None);
-    let mut mask = sensing_mask(&rest_density);
+    let mut mask = sensing_mask(&rest_density.values_per_mm2);
     let grid = density.grid();
     if let Some(area) = &detector.area {
         for (k, m) in mask.iter_mut().enumerate() {
@@ -887,19 +887,24 @@ fn median_spacing(points: &[PointPx]) -> f64 {
     *d.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
-fn sensing_mask(rest: &DensityMap) -> Vec<bool> {
-    let mut inside: Vec<f32> = rest
-        .values_per_mm2
+/// The sensing mask of a rest density (`values_per_mm2` of a
+/// [`DensityMap`]): the cells whose density is at least [`MASK_FRACTION`] of
+/// the typical interior density, the 90th percentile of the positive
+/// cells. Empty cells (beyond the lattice) and non-finite ones are never in
+/// it, and do not lower the percentile. The calibration's mask, and the live
+/// view's for a sensor it has no calibration of.
+pub fn sensing_mask(rest_per_mm2: &[f32]) -> Vec<bool> {
+    let mut inside: Vec<f32> = rest_per_mm2
         .iter()
-        .cloned()
-        .filter(|v| *v > 0.0)
+        .copied()
+        .filter(|v| *v > 0.0 && v.is_finite())
         .collect();
     if inside.is_empty() {
-        return vec![false; rest.values_per_mm2.len()];
+        return vec![false; rest_per_mm2.len()];
     }
     let k = (inside.len() - 1) * 9 / 10;
     let typical = *inside.select_nth_unstable_by(k, f32::total_cmp).1;
-    rest.values_per_mm2
+    rest_per_mm2
         .iter()
         .map(|&v| v >= MASK_FRACTION * typical)
         .collect()
@@ -1304,7 +1309,7 @@ mod tests {
             skin: None,
         };
         let density = density::estimate(&rest, &setup, None);
-        let mask = sensing_mask(&density);
+        let mask = sensing_mask(&density.values_per_mm2);
         let g = density.grid;
         let surface = Surface::Dome(dome);
         let trusted_share = |surface: &Surface| {

@@ -22,7 +22,7 @@ use dexitac_protocol::{ArmState, Chambers, HostMsg, Telemetry, NO_READING_PA};
 use dexitac_gripper::grasp::{Cause, CentreMm, Command, Decision, GraspParams, SENSOR_COUNT};
 use dexitac_gripper::manipulation::{GuardTrip, TaskEvent};
 use dexitac_rig::event::{RuntimeEvent, StopReason};
-use dexitac_tactile::calibrate::{Calibration, MASK_FRACTION};
+use dexitac_tactile::calibrate::{sensing_mask, Calibration};
 use dexitac_tactile::contact::Contact;
 use dexitac_tactile::density::{self, DensityMap, DensitySetup};
 use dexitac_tactile::frame::GreyFrame;
@@ -146,8 +146,7 @@ pub(crate) struct RestRef {
     pub setup: DensitySetup,
     /// Rest density on `setup.grid()`.
     pub density: DensityMap,
-    /// Sensing area (cells whose rest density is at least
-    /// [`MASK_FRACTION`] of the interior's).
+    /// Sensing area ([`sensing_mask`], the calibration's rule).
     pub mask: Vec<bool>,
 }
 
@@ -178,20 +177,6 @@ fn view_setup(width: usize, height: usize, params: &Params) -> DensitySetup {
         truncate_sigmas: params.density.truncate_sigmas,
         skin: None,
     }
-}
-
-/// Cells whose rest density reaches [`MASK_FRACTION`] of the 90th
-/// percentile (the calibration's rule for the sensing area).
-fn sensing_mask(rest: &[f32]) -> Vec<bool> {
-    let mut sorted: Vec<f32> = rest.iter().copied().filter(|v| v.is_finite()).collect();
-    sorted.sort_by(f32::total_cmp);
-    let p90 = sorted
-        .get(sorted.len().saturating_mul(9) / 10)
-        .copied()
-        .unwrap_or(0.0);
-    rest.iter()
-        .map(|&v| p90 > 0.0 && v >= MASK_FRACTION * p90)
-        .collect()
 }
 
 /// One fingertip's latest state and history.
@@ -690,5 +675,38 @@ mod tests {
         assert_eq!(d.sensors[0].centre_mm, None);
         assert_eq!(d.sensors[0].pipeline_ms, None);
         assert_eq!(d.events(), 3);
+    }
+    /// A sensor with no calibration gets its heatmap reference from its
+    /// first markers, with the calibration's mask rule: a lattice that fills
+    /// a few per cent of the frame is a sensing area, not nothing (the
+    /// view's own rule took the 90th percentile over every cell, empty ones
+    /// too, and found none where the lattice covered under a tenth).
+    #[test]
+    fn an_uncalibrated_sensor_gets_the_calibrations_mask() {
+        let params = Params::default();
+        let markers: Vec<PointPx> = (0..6)
+            .flat_map(|j| {
+                (0..6).map(move |i| {
+                    let x = 300.0 + 15.0 * i as f64 + if j % 2 == 1 { 7.5 } else { 0.0 };
+                    PointPx::new(x, 200.0 + 13.0 * j as f64)
+                })
+            })
+            .collect();
+        let rest = RestRef::from_markers(&markers, 640, 480, &params);
+        let inside = rest.mask.iter().filter(|&&m| m).count();
+        let cells = rest.mask.len();
+        assert!(inside > 0, "no cell of the lattice is in the mask");
+        assert!(
+            10 * inside < cells,
+            "{inside} of {cells} cells: the mask runs beyond the lattice"
+        );
+        assert_eq!(rest.mask, sensing_mask(&rest.density.values_per_mm2));
+        let centre = rest.setup.grid().point_of(
+            rest.mask
+                .iter()
+                .position(|&m| m)
+                .expect("a cell in the mask"),
+        );
+        assert!((280.0..400.0).contains(&centre.x) && (180.0..290.0).contains(&centre.y));
     }
 }
