@@ -906,7 +906,7 @@ pub fn sensing_mask(rest_per_mm2: &[f32]) -> Vec<bool> {
     let typical = *inside.select_nth_unstable_by(k, f32::total_cmp).1;
     rest_per_mm2
         .iter()
-        .map(|&v| v >= MASK_FRACTION * typical)
+        .map(|&v| v.is_finite() && v >= MASK_FRACTION * typical)
         .collect()
 }
 

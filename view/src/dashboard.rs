@@ -676,6 +676,7 @@ mod tests {
         assert_eq!(d.sensors[0].pipeline_ms, None);
         assert_eq!(d.events(), 3);
     }
+
     /// A sensor with no calibration gets its heatmap reference from its
     /// first markers, with the calibration's mask rule: a lattice that fills
     /// a few per cent of the frame is a sensing area, not nothing (the
@@ -701,12 +702,14 @@ mod tests {
             "{inside} of {cells} cells: the mask runs beyond the lattice"
         );
         assert_eq!(rest.mask, sensing_mask(&rest.density.values_per_mm2));
-        let centre = rest.setup.grid().point_of(
-            rest.mask
-                .iter()
-                .position(|&m| m)
-                .expect("a cell in the mask"),
-        );
-        assert!((280.0..400.0).contains(&centre.x) && (180.0..290.0).contains(&centre.y));
+        // Every cell of it lies on the lattice (x 300-383 px, y 200-265 px).
+        let grid = rest.setup.grid();
+        for (k, _) in rest.mask.iter().enumerate().filter(|(_, &m)| m) {
+            let p = grid.point_of(k);
+            assert!(
+                (285.0..400.0).contains(&p.x) && (185.0..280.0).contains(&p.y),
+                "a mask cell at {p:?}, off the lattice"
+            );
+        }
     }
 }
