@@ -38,11 +38,13 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from centre_floor import scored  # noqa: E402
+from render import H, W  # noqa: E402
 from run import fnum, read_csv, run_dexitac  # noqa: E402
 
 DOME = ["nominal", "harsh_light", "blur", "two_colour", "large"]
 CATEGORIES = DOME + ["flat_nominal", "edge"]
-IMAGE_CENTRE = np.array([319.5, 239.5])
+IMAGE_CENTRE = np.array([W, H]) / 2  # as centre_floor.scored takes it
 
 
 def contacts(frames: Path, work: Path, dexitac: str, cat: str) -> list[dict]:
@@ -138,11 +140,13 @@ def parallax_table(per_cat: dict[str, list[dict]]) -> list[str]:
 def rim_table(found: list[dict]) -> list[str]:
     lines = ["| rim distance px | contacts | centre error median / p95 px | radial median px |", "|---|---|---|---|"]
     for lo, hi in [(0, 40), (40, 55), (55, 80)]:
-        sel = [c for c in found if lo <= c["rim_px"] < hi]
-        e = np.array([np.linalg.norm(c["centre"] - c["truth"]) for c in sel])
-        rad = [(c["centre"] - c["truth"]) @ (c["truth"] - IMAGE_CENTRE) / np.linalg.norm(c["truth"] - IMAGE_CENTRE)
-               for c in sel]
-        lines.append(f"| {lo}-{hi} | {len(sel)} | {stats(e)} | {np.median(rad):+.2f} |" if sel else f"| {lo}-{hi} | 0 | – | – |")
+        err: list[float] = []
+        rad: list[float] = []
+        for c in found:
+            if lo <= c["rim_px"] < hi:
+                scored(c["centre"], c["truth"], err, rad)
+        lines.append(f"| {lo}-{hi} | {len(err)} | {stats(np.array(err))} | {np.median(rad):+.2f} |"
+                     if err else f"| {lo}-{hi} | 0 | – | – |")
     return lines
 
 
